@@ -1,0 +1,34 @@
+# Two entry points (README): `make repro` installs and runs the pipeline, `make test` installs and runs the tests.
+SHELL := /bin/bash
+PYTHON ?= $(shell command -v python3.12 2>/dev/null || ls -d $$HOME/.pyenv/versions/3.12*/bin/python3.12 2>/dev/null | tail -n 1)
+VENV := .venv
+BIN := $(VENV)/bin
+export MUJOCO_GL ?= egl
+export HF_HUB_OFFLINE := 1
+export HF_DATASETS_OFFLINE := 1
+export DVC_NO_ANALYTICS := 1
+export TQDM_MININTERVAL ?= 5
+
+.PHONY: install test repro bench clean
+
+$(BIN)/.installed: pyproject.toml
+	@test -n "$(PYTHON)" || { echo "error: Python 3.12 not found; install it (pyenv install 3.12) or run make PYTHON=/path/to/python3.12" >&2; exit 1; }
+	@ldconfig -p | grep -q 'libEGL.so.1' || { echo "installing Mesa EGL for headless rendering"; apt-get update -qq && apt-get install -y -qq libegl1 libgl1-mesa-dri >/dev/null; }
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e '.[dev]'
+	touch $@
+
+install: $(BIN)/.installed
+
+test: install
+	$(BIN)/pytest -n 2
+
+repro: install
+	$(BIN)/dvc repro
+
+bench: install
+	$(BIN)/mor bench sim
+
+clean:
+	rm -rf $(VENV) .pytest_cache

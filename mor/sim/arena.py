@@ -1,0 +1,94 @@
+"""The walled arena: a square (the paper's main world) or an irregular polygon (paper Figure 5)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from mor.sim.geometry import Array, point_in_polygon, point_segment_distance
+
+ARENA_SHAPES: tuple[str, ...] = ("square", "polygon")
+
+# An irregular hexagon in units of the arena size (side of its bounding square), counter-clockwise,
+# starting with the south wall so that wall k of the square and of the polygon face similar directions.
+_POLYGON_UNIT: tuple[tuple[float, float], ...] = (
+    (-0.30, -0.50),
+    (0.50, -0.38),
+    (0.42, 0.20),
+    (0.05, 0.50),
+    (-0.50, 0.32),
+    (-0.42, -0.12),
+)
+
+
+@dataclass(frozen=True)
+class Arena:
+    """A simple polygon of walls; ``vertices`` (k, 2) counter-clockwise, metres.
+
+    Wall k runs from vertex k to vertex k+1; the arena's inside is on its left.
+    """
+
+    shape: str
+    vertices: tuple[tuple[float, float], ...]
+
+    @classmethod
+    def build(cls, shape: str, size: float) -> Arena:
+        """The arena ``shape`` ("square" or "polygon") whose bounding square has side ``size`` metres."""
+        if shape == "square":
+            h = size / 2.0
+            return cls("square", ((-h, -h), (h, -h), (h, h), (-h, h)))
+        if shape == "polygon":
+            return cls("polygon", tuple((x * size, y * size) for x, y in _POLYGON_UNIT))
+        raise ValueError(f"unknown arena shape {shape!r}; choose one of {ARENA_SHAPES}")
+
+    @cached_property
+    def vertex_array(self) -> Array:
+        return np.asarray(self.vertices, dtype=np.float64)
+
+    @property
+    def n_walls(self) -> int:
+        return len(self.vertices)
+
+    @cached_property
+    def wall_starts(self) -> Array:
+        """(k, 2) the first end of each wall."""
+        return self.vertex_array
+
+    @cached_property
+    def wall_ends(self) -> Array:
+        """(k, 2) the second end of each wall."""
+        return np.roll(self.vertex_array, -1, axis=0)
+
+    def walls(self) -> list[tuple[Array, Array]]:
+        """The wall segments [(start (2,), end (2,)), ...] in counter-clockwise order."""
+        return list(zip(self.wall_starts, self.wall_ends, strict=True))
+
+    @cached_property
+    def half_extent(self) -> float:
+        """Half the side of the smallest origin-centred square holding the arena (metres)."""
+        return float(np.abs(self.vertex_array).max())
+
+    def clearance(self, point: Array) -> float:
+        """Distance (metres) from ``point`` to the nearest wall; negative when outside the arena."""
+        distance = float(np.min(point_segment_distance(point, self.wall_starts, self.wall_ends)))
+        return distance if point_in_polygon(point, self.vertex_array) else -distance
+
+    def contains(self, point: Array, margin: float = 0.0) -> bool:
+        """Whether ``point`` is inside with at least ``margin`` metres to every wall."""
+        return self.clearance(np.asarray(point, dtype=np.float64)) >= margin
+
+    def area(self) -> float:
+        """Area in square metres (shoelace formula)."""
+        x, y = self.vertex_array.T
+        return float(0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+    def sample_point(self, rng: np.random.Generator, margin: float, max_tries: int = 1000) -> Array | None:
+        """A uniform point at least ``margin`` from every wall, or None after ``max_tries`` rejections."""
+        low, high = self.vertex_array.min(axis=0), self.vertex_array.max(axis=0)
+        for _ in range(max_tries):
+            point = rng.uniform(low, high)
+            if self.contains(point, margin):
+                return point
+        return None

@@ -1,0 +1,43 @@
+"""The simulator's parameters: one validated record shared by the envs, ``params.yaml`` and the CLI."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from mor.errors import ConfigError
+
+
+class SimConfig(BaseModel):
+    """What a world looks like. Distances in metres, image size in pixels (square images)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    n_objects: int = Field(3, ge=1, le=5, description="objects per episode")
+    image_size: int = Field(64, ge=16, le=512, description="first-person image side, pixels")
+    arena: Literal["square", "polygon"] = Field("square", description="arena shape")
+    arena_size: float = Field(6.0, gt=0.0, le=50.0, description="side of the arena's bounding square, metres")
+    texture_pool: Literal["per_side", "symmetric"] = Field(
+        "per_side", description="per_side: each wall side has its own texture sub-pool; symmetric: one shared pool"
+    )
+    landmark: bool = Field(False, description="show a non-colliding marker at each drop target (paper Figure 4)")
+
+
+def format_validation_error(error: ValidationError, where: str) -> str:
+    """One line naming the first offending field of ``error`` under ``where`` and what is wrong with it."""
+    first = error.errors()[0]
+    field = ".".join(str(part) for part in first["loc"])
+    prefix = f"{where}: " if where else ""
+    if first["type"] == "extra_forbidden":
+        return f"{prefix}{field}: unknown key; remove it or fix its spelling"
+    got = first.get("input")
+    return f"{prefix}{field}: {first['msg']} (got {got!r})"
+
+
+def make_sim_config(where: str = "", **values: object) -> SimConfig:
+    """A validated ``SimConfig``; raises ``ConfigError`` with one line naming the bad field."""
+    try:
+        return SimConfig(**values)
+    except ValidationError as error:
+        raise ConfigError(format_validation_error(error, where)) from None

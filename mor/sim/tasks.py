@@ -1,0 +1,127 @@
+"""The three tasks of paper section 3.2 with their rewards (Eq. 1, Eq. 2) and termination rules."""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+
+from mor.sim import metrics
+from mor.sim.env import MOREnv, StepOutcome
+from mor.sim.rules import Action, Events, WorldState
+
+SUCCESS_REWARD: float = 10.0
+COLLISION_PENALTY: float = 1.0
+STEP_PENALTY: float = 0.01
+
+
+def _goal_position_space(half_extent: float, shape: tuple[int, ...]) -> spaces.Box:
+    return spaces.Box(-half_extent, half_extent, shape, np.float32)
+
+
+class PickEnv(MOREnv):
+    """Pick(s_i^0): pick object ``goal_object``. Ends on any PICK, an obstruction, or after 150 steps.
+
+    Reward (Eq. 1): -(D_{t+1} - D_t) + 10 * [picked the goal] - [obstructed], D = agent-to-goal-object distance.
+    DROP is removed (masked).
+    """
+
+    default_horizon = 150
+    removed_action = Action.DROP
+
+    def _goal_spaces(self, n: int, half_extent: float) -> dict[str, spaces.Space]:
+        return {"goal_object": spaces.Discrete(n)}
+
+    def _begin_task(self) -> None:
+        self.goal_object = int(self.np_random.integers(self.config.n_objects))
+
+    def _goal_observation(self) -> dict[str, np.ndarray | int]:
+        return {"goal_object": self.goal_object}
+
+    def _outcome(self, before: WorldState, events: Events) -> StepOutcome:
+        goal = before.floor_positions[self.goal_object]
+        progress = np.linalg.norm(before.agent_pose[:2] - goal) - np.linalg.norm(self.state.agent_pose[:2] - goal)
+        success = events.picked == self.goal_object
+        reward = progress + SUCCESS_REWARD * success - COLLISION_PENALTY * events.obstructed
+        return StepOutcome(float(reward), events.action == Action.PICK or events.obstructed, success)
+
+
+class DropEnv(MOREnv):
+    """Drop(s_i^*): the agent starts where object ``held`` lay, holding it, and must drop it within 1 m of
+    ``goal_position``. Ends on any DROP, an obstruction, or after 150 steps.
+
+    Reward: as Eq. 1 with D = agent-to-target distance. PICK is removed (masked).
+    """
+
+    default_horizon = 150
+    removed_action = Action.PICK
+
+    def _goal_spaces(self, n: int, half_extent: float) -> dict[str, spaces.Space]:
+        return {"goal_position": _goal_position_space(half_extent, (2,))}
+
+    def _begin_task(self) -> None:
+        self.goal_object = int(self.np_random.integers(self.config.n_objects))
+        self.state.held = self.goal_object
+        self.state.agent_pose[:2] = self.state.floor_positions[self.goal_object]
+
+    @property
+    def goal_position(self) -> np.ndarray:
+        return self.layout.target_positions[self.goal_object]
+
+    def _goal_observation(self) -> dict[str, np.ndarray | int]:
+        return {"goal_position": self.goal_position.astype(np.float32)}
+
+    def _landmarks(self) -> list[tuple[np.ndarray, int]]:
+        return [(self.goal_position, int(self.layout.object_classes[self.goal_object]))]
+
+    def _outcome(self, before: WorldState, events: Events) -> StepOutcome:
+        target = self.goal_position
+        progress = np.linalg.norm(before.agent_pose[:2] - target) - np.linalg.norm(self.state.agent_pose[:2] - target)
+        success = events.dropped == self.goal_object and bool(
+            metrics.is_fixed(self.state.floor_positions[[self.goal_object]], target[None])[0]
+        )
+        reward = progress + SUCCESS_REWARD * success - COLLISION_PENALTY * events.obstructed
+        return StepOutcome(float(reward), events.action == Action.DROP or events.obstructed, success)
+
+
+class RearrangeEnv(MOREnv):
+    """The full task: move every object to within 1 m of its target. Ends when all are placed (nothing held),
+    on an obstruction, or after 1000 steps.
+
+    Reward (Eq. 2): -0.01 + 10 * (change in the number of objects lying at their targets) - [obstructed].
+    Counting the change (rather than a one-off indicator) pays each placement once and takes it back if the
+    object is picked up again, so the reward cannot be farmed (docs/assumptions.md).
+    """
+
+    default_horizon = 1000
+
+    def _goal_spaces(self, n: int, half_extent: float) -> dict[str, spaces.Space]:
+        return {"target_positions": _goal_position_space(half_extent, (n, 2))}
+
+    def _goal_observation(self) -> dict[str, np.ndarray | int]:
+        return {"target_positions": self.layout.target_positions.astype(np.float32)}
+
+    def _landmarks(self) -> list[tuple[np.ndarray, int]]:
+        return [(t, int(c)) for t, c in zip(self.layout.target_positions, self.layout.object_classes, strict=True)]
+
+    def _begin_task(self) -> None:
+        self._placed_count = self._placed()
+
+    def _placed(self) -> int:
+        """How many objects lie (not held) within the success radius of their targets."""
+        fixed = metrics.is_fixed(self.state.floor_positions, self.layout.target_positions)
+        return int(np.sum(fixed & self.state.on_floor()))
+
+    def _outcome(self, before: WorldState, events: Events) -> StepOutcome:
+        placed = self._placed()
+        change, self._placed_count = placed - self._placed_count, placed
+        success = placed == self.config.n_objects
+        reward = -STEP_PENALTY + SUCCESS_REWARD * change - COLLISION_PENALTY * events.obstructed
+        return StepOutcome(float(reward), success or events.obstructed, success)
+
+    def _metrics(self, outcome: StepOutcome) -> dict[str, float]:
+        positions, targets = self.state.object_positions(), self.layout.target_positions
+        return {
+            "success": metrics.rearrange_success(positions, targets),
+            "fixed_strict": metrics.fixed_strict(positions, targets),
+            "energy_remaining": metrics.energy_remaining(positions, targets, self.layout.initial_positions),
+        }
