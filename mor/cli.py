@@ -13,6 +13,7 @@ import typer
 
 from mor.config import DEFAULT_PARAMS, load_profile
 from mor.errors import ConfigError, MorError
+from pipelines import paths
 
 app = typer.Typer(help="MOR: Mobile Object Rearrangement toolkit.", no_args_is_help=True, add_completion=False)
 sim_app = typer.Typer(help="The simulator: oracle evaluation, rendered views and videos.", no_args_is_help=True)
@@ -126,6 +127,60 @@ def sim_demo(
     typer.echo(f"wrote {out} ({record.steps} steps, metrics {record.metrics})")
 
 
+@app.command("collect")
+@one_line_errors
+def collect_command(
+    episodes: Annotated[int | None, typer.Option(help="Episodes in the collection (default: the profile's).")] = None,
+    workers: Annotated[int | None, typer.Option(help="Worker processes or Ray tasks at once.")] = None,
+    backend: Annotated[str | None, typer.Option(help="process (default) or ray.")] = None,
+    rejected_from: Annotated[Path | None, typer.Option(help="Validation report whose rejected files to redo.")] = (
+        paths.VALIDATION_REPORT),
+    out_dir: Annotated[Path, typer.Option(help="Folder of episode MCAP files.")] = paths.EPISODES,
+    profile: ProfileOption = "default",
+    params: ParamsOption = DEFAULT_PARAMS,
+) -> None:
+    """Collect random-action episodes as MCAP files; resumes, and redoes what validation rejected."""
+    from pipelines import collect
+
+    if backend not in (None, "process", "ray"):
+        raise ConfigError(f"--backend: unknown backend {backend!r}; choose 'process' or 'ray'")
+    result = collect.run(load_profile(profile, params), out_dir, paths.COLLECT_STATS, rejected_from, workers,
+                         backend, episodes)
+    typer.echo(f"collected {result['collected']} episodes ({result['skipped']} already there), "
+               f"{result['frames']} frames at {result['frames_per_s']:.0f} frames/s into {out_dir}")
+
+
+@app.command("build-dataset")
+@one_line_errors
+def build_dataset_command(
+    workers: Annotated[int | None, typer.Option(help="Worker processes (default: the profile's).")] = None,
+    profile: ProfileOption = "default",
+    params: ParamsOption = DEFAULT_PARAMS,
+) -> None:
+    """Write the manifest, one LeRobot dataset per split (8:1:1) and the dataset card."""
+    from pipelines import build
+
+    result = build.run(load_profile(profile, params), paths.EPISODES, paths.MANIFEST, paths.LEROBOT,
+                       paths.DATASET_CARD, workers)
+    typer.echo(f"dataset {result['dataset_version']}: {result['episodes']} episodes per split in {paths.LEROBOT}; "
+               f"card {result['card']}")
+
+
+@app.command("validate")
+@one_line_errors
+def validate_command() -> None:
+    """Check every episode file and split against the manifest; exit 1 if anything is wrong."""
+    from pipelines import validate
+
+    report = validate.run(paths.MANIFEST, paths.EPISODES, paths.LEROBOT, paths.VALIDATION_REPORT)
+    for problem in report.problems:
+        typer.echo(problem, err=True)
+    typer.echo(f"checked {report.episodes_checked} episodes: {len(report.rejected)} rejected; "
+               f"splits {report.splits}; report {paths.VALIDATION_REPORT}")
+    if not report.ok:
+        raise typer.Exit(1)
+
+
 @bench_app.command("sim")
 @one_line_errors
 def bench_sim(
@@ -146,6 +201,32 @@ def bench_sim(
     result = benchmark_sim(env_ids, steps, repeats, workers, {"image_size": image_size})
     for env_id, numbers in result["results"].items():
         typer.echo(f"{env_id}: " + ", ".join(f"{k} {v:.0f}" for k, v in numbers.items() if not k.startswith("runs")))
+    typer.echo(f"wrote {write_json(out, result)}")
+
+
+@bench_app.command("collect")
+@one_line_errors
+def bench_collect(
+    episodes: Annotated[int, typer.Option(help="Episodes per run.")] = 40,
+    repeats: Annotated[int, typer.Option(help="Runs per worker count; the median is reported.")] = 3,
+    out: Annotated[Path, typer.Option(help="JSON to write.")] = Path("datasets/bench/collect.json"),
+    profile: ProfileOption = "default",
+    params: ParamsOption = DEFAULT_PARAMS,
+) -> None:
+    """Collection frames/s end to end with one and two workers, bytes per frame, paper-profile projection."""
+    from mor.data.bench import benchmark_collect
+    from mor.data.collect import CollectionSpec
+    from pipelines.io import write_json
+
+    config = load_profile(profile, params)
+    spec = CollectionSpec(config.sim, config.collect.exploration, config.collect.seed, config.collect.episode_steps,
+                          config.collect.fps)
+    result = benchmark_collect(spec, episodes, [1, 2], repeats)
+    for name, entry in result["results"].items():
+        typer.echo(f"{name}: {entry['frames_per_s']:.0f} frames/s")
+    projection = result["paper_profile_projection"]
+    typer.echo(f"{result['bytes_per_frame']:.0f} bytes/frame; paper profile ({projection['episodes']} episodes): "
+               f"{projection['hours']:.2f} h, {projection['disk_gb']:.1f} GB")
     typer.echo(f"wrote {write_json(out, result)}")
 
 

@@ -8,6 +8,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from mor.data.exploration import ExplorationParams
 from mor.errors import ConfigError
 from mor.sim.config import SimConfig, format_validation_error
 
@@ -35,12 +36,33 @@ class DemoParams(_Strict):
     fps: int = Field(8, ge=1, le=60)
 
 
+class CollectParams(_Strict):
+    """Random-action data collection (stage ``collect``)."""
+
+    episodes: int = Field(2000, ge=1, le=1_000_000)
+    episode_steps: int = Field(150, ge=1, le=100_000, description="actions per episode (frames = steps + 1)")
+    seed: int = Field(0, ge=0)
+    fps: float = Field(10.0, gt=0.0, le=120.0, description="frame rate of the records and datasets")
+    workers: int = Field(2, ge=1, le=1024)
+    backend: Literal["process", "ray"] = "process"
+    exploration: ExplorationParams = Field(default_factory=ExplorationParams)
+
+
+class BuildParams(_Strict):
+    """Manifest, LeRobot splits and dataset card (stage ``build``)."""
+
+    workers: int = Field(2, ge=1, le=1024)
+    shard_episodes: int = Field(100, ge=1, description="episodes per build shard (the unit of resumption)")
+
+
 class Profile(_Strict):
     """One scale profile: every stage's parameters."""
 
     sim: SimConfig = Field(default_factory=SimConfig)
     oracle: OracleParams = Field(default_factory=OracleParams)
     demo: DemoParams = Field(default_factory=DemoParams)
+    collect: CollectParams = Field(default_factory=CollectParams)
+    build: BuildParams = Field(default_factory=BuildParams)
 
 
 def load_profile(name: str, path: Path = DEFAULT_PARAMS) -> Profile:

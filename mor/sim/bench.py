@@ -15,8 +15,13 @@ import numpy as np
 from mor.sim.rollout import RandomPolicy
 
 
-def _steps_per_second(env_id: str, steps: int, seed: int, env_kwargs: dict[str, Any]) -> float:
-    """Random-policy steps/s over ``steps`` steps (resets included), after a short warm-up."""
+def _steps_per_second(
+    env_id: str, steps: int, seed: int, env_kwargs: dict[str, Any], start_together: Any = None
+) -> float:
+    """Random-policy steps/s over ``steps`` steps (resets included), after a short warm-up.
+
+    start_together: a multiprocessing Barrier that all workers pass before timing, so their runs overlap.
+    """
     env = gym.make(env_id, **env_kwargs)
     policy = RandomPolicy(env, seed)
     observation, info = env.reset(seed=seed)
@@ -24,6 +29,8 @@ def _steps_per_second(env_id: str, steps: int, seed: int, env_kwargs: dict[str, 
         observation, _, terminated, truncated, info = env.step(policy(observation, info))
         if terminated or truncated:
             observation, info = env.reset()
+    if start_together is not None:
+        start_together.wait()
     start = time.perf_counter()
     for _ in range(steps):
         observation, _, terminated, truncated, info = env.step(policy(observation, info))
@@ -34,19 +41,25 @@ def _steps_per_second(env_id: str, steps: int, seed: int, env_kwargs: dict[str, 
     return steps / elapsed
 
 
-def _worker(args: tuple[str, int, int, dict[str, Any]]) -> float:
-    os.environ.setdefault("LP_NUM_THREADS", "1")
-    return _steps_per_second(*args)
+def _worker(env_id: str, steps: int, seed: int, env_kwargs: dict[str, Any], barrier: Any, results: Any) -> None:
+    os.environ.setdefault("LP_NUM_THREADS", "1")  # one llvmpipe thread per worker process
+    results.put(_steps_per_second(env_id, steps, seed, env_kwargs, barrier))
 
 
 def _parallel_steps_per_second(env_id: str, steps: int, workers: int, env_kwargs: dict[str, Any]) -> float:
-    """Total steps/s of ``workers`` processes, each stepping its own env (wall time of the slowest)."""
+    """Summed steps/s of ``workers`` processes stepping their own envs at the same time (start-up excluded)."""
     context = mp.get_context("spawn")
-    with context.Pool(workers) as pool:
-        start = time.perf_counter()
-        pool.map(_worker, [(env_id, steps, seed, env_kwargs) for seed in range(workers)])
-        elapsed = time.perf_counter() - start
-    return workers * steps / elapsed
+    barrier, results = context.Barrier(workers), context.Queue()
+    processes = [
+        context.Process(target=_worker, args=(env_id, steps, seed, env_kwargs, barrier, results))
+        for seed in range(workers)
+    ]
+    for process in processes:
+        process.start()
+    rates = [results.get() for _ in processes]
+    for process in processes:
+        process.join()
+    return float(sum(rates))
 
 
 def benchmark_sim(

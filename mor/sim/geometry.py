@@ -14,7 +14,9 @@ Array = NDArray[np.float64]
 
 def wrap_angle(angle: ArrayLike) -> Array:
     """Angle(s) wrapped to [-pi, pi)."""
-    return (np.asarray(angle, dtype=np.float64) + np.pi) % (2.0 * np.pi) - np.pi
+    wrapped = (np.asarray(angle, dtype=np.float64) + np.pi) % (2.0 * np.pi) - np.pi
+    # Rounding can give exactly pi (e.g. for the float just below -pi); fold it to -pi to keep [-pi, pi).
+    return wrapped - 2.0 * np.pi * (wrapped >= np.pi)
 
 
 def heading_vector(theta: float) -> Array:

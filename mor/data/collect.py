@@ -1,0 +1,174 @@
+"""Collecting random-action episodes into MCAP files: resumable, seeded, in parallel processes or Ray tasks.
+
+Episode ``index`` of a collection with seed ``seed`` is ``sim-<seed>-<index:06d>.mcap``; its env seed is
+``episode_seed(seed, index)``. A finished episode is never redone; a ``.partial`` file is discarded.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+from tqdm import tqdm
+
+from mor.data.episode_io import EpisodeHeader, EpisodeWriter, encode_png
+from mor.data.exploration import ExplorationParams, ExplorationPolicy
+from mor.sim.config import SimConfig
+from mor.sim.rollout import episode_seed
+from mor.sim.rules import Action
+
+EPISODE_SUFFIX = ".mcap"
+ENV_ID = "MOR/Rearrange-v0"
+
+
+@dataclass(frozen=True)
+class CollectionSpec:
+    """Everything that determines a collection's episodes."""
+
+    sim: SimConfig
+    exploration: ExplorationParams
+    seed: int
+    episode_steps: int
+    fps: float
+
+    def params(self) -> dict[str, Any]:
+        return {"sim": self.sim.model_dump(), "exploration": self.exploration.model_dump(), "seed": self.seed,
+                "episode_steps": self.episode_steps, "fps": self.fps, "env_id": ENV_ID}
+
+
+def episode_id(seed: int, index: int) -> str:
+    return f"sim-{seed}-{index:06d}"
+
+
+def episode_path(out_dir: Path, seed: int, index: int) -> Path:
+    return out_dir / f"{episode_id(seed, index)}{EPISODE_SUFFIX}"
+
+
+def pending_indices(out_dir: Path, seed: int, episodes: int, rejected: set[str] = frozenset()) -> list[int]:
+    """Indices still to collect: missing files, and files named in ``rejected`` (deleted here). Removes
+    leftover ``.partial`` files of interrupted runs."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for leftover in out_dir.glob(f"*{EPISODE_SUFFIX}.partial"):
+        leftover.unlink()
+    for name in rejected:
+        (out_dir / name).unlink(missing_ok=True)
+    return [i for i in range(episodes) if not episode_path(out_dir, seed, i).exists()]
+
+
+class EpisodeCollector:
+    """Owns one env (one renderer) and writes episodes with it; one per worker process."""
+
+    def __init__(self, spec: CollectionSpec, out_dir: Path) -> None:
+        self.spec, self.out_dir = spec, out_dir
+        self.env = gym.make(ENV_ID, horizon=spec.episode_steps, **spec.sim.model_dump())
+
+    def collect(self, index: int) -> int:
+        """Write episode ``index``; returns its frame count."""
+        spec, env = self.spec, self.env
+        seed = episode_seed(spec.seed, index)
+        policy = ExplorationPolicy(env.unwrapped.arena, spec.exploration, seed, env.unwrapped.noise)
+        observation, info = env.reset(seed=seed)
+        layout = env.unwrapped.layout
+        header = EpisodeHeader(
+            episode_id=episode_id(spec.seed, index), source="sim", seed=seed, fps=spec.fps,
+            object_classes=layout.object_classes, target_positions=layout.target_positions,
+            wall_textures=layout.wall_textures, params=spec.params(),
+        )
+        with EpisodeWriter(episode_path(self.out_dir, spec.seed, index), header) as writer:
+            done = False
+            while not done:
+                action = policy(observation, info)
+                writer.add_frame(encode_png(observation["image"]), info["agent_pose"], info["object_positions"],
+                                 info["held"], action)
+                observation, _, terminated, truncated, info = env.step(action)
+                done = terminated or truncated
+            writer.add_frame(encode_png(observation["image"]), info["agent_pose"], info["object_positions"],
+                             info["held"], -1)
+            return writer.n_frames
+
+    def close(self) -> None:
+        self.env.close()
+
+
+_WORKER: EpisodeCollector | None = None
+
+
+def _init_worker(spec: CollectionSpec, out_dir: Path) -> None:
+    global _WORKER
+    os.environ.setdefault("LP_NUM_THREADS", "1")  # one llvmpipe render thread per worker process
+    _WORKER = EpisodeCollector(spec, out_dir)
+
+
+def _collect_in_worker(index: int) -> int:
+    assert _WORKER is not None
+    return _WORKER.collect(index)
+
+
+def _collect_batch(spec: CollectionSpec, out_dir: Path, batch: list[int]) -> list[int]:
+    """One Ray task: a fresh collector (one renderer) for a batch of episodes."""
+    os.environ.setdefault("LP_NUM_THREADS", "1")
+    collector = EpisodeCollector(spec, out_dir)
+    try:
+        return [collector.collect(index) for index in batch]
+    finally:
+        collector.close()
+
+
+def _run_processes(spec: CollectionSpec, out_dir: Path, indices: list[int], workers: int) -> Iterator[int]:
+    if workers <= 1:
+        collector = EpisodeCollector(spec, out_dir)
+        try:
+            yield from (collector.collect(i) for i in indices)
+        finally:
+            collector.close()
+        return
+    with mp.get_context("spawn").Pool(workers, initializer=_init_worker, initargs=(spec, out_dir)) as pool:
+        yield from pool.imap_unordered(_collect_in_worker, indices, chunksize=2)
+
+
+def _run_ray(spec: CollectionSpec, out_dir: Path, indices: list[int], workers: int) -> Iterator[int]:
+    import ray  # noqa: PLC0415 - optional backend
+
+    started_here = not ray.is_initialized()
+    if started_here:
+        ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, configure_logging=False)
+
+    collect_batch = ray.remote(num_cpus=1)(_collect_batch)
+    batch_size = max(1, min(16, len(indices) // (4 * workers) or 1))
+    pending = [collect_batch.remote(spec, out_dir, indices[i:i + batch_size]) for i in range(0, len(indices), batch_size)]
+    try:
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            for frames in ray.get(ready[0]):
+                yield frames
+    finally:
+        if started_here:
+            ray.shutdown()
+
+
+def collect(spec: CollectionSpec, out_dir: Path, episodes: int, workers: int, backend: str = "process",
+            rejected: set[str] = frozenset(), progress: bool = True) -> dict[str, Any]:
+    """Collect every missing episode of ``spec`` into ``out_dir``; returns counts and throughput."""
+    indices = pending_indices(out_dir, spec.seed, episodes, rejected)
+    runner = {"process": _run_processes, "ray": _run_ray}.get(backend)
+    if runner is None:
+        raise ValueError(f"backend: unknown backend {backend!r}; choose 'process' or 'ray'")
+    frames = 0
+    start = time.perf_counter()
+    with tqdm(total=episodes, initial=episodes - len(indices), desc="collect", unit="ep", disable=not progress) as bar:
+        for count in runner(spec, out_dir, indices, workers) if indices else ():
+            frames += count
+            bar.update(1)
+            bar.set_postfix(frames_per_s=f"{frames / (time.perf_counter() - start):.0f}", refresh=False)
+    elapsed = time.perf_counter() - start
+    return {"collected": len(indices), "skipped": episodes - len(indices), "frames": frames,
+            "seconds": elapsed, "frames_per_s": frames / elapsed if frames else 0.0}
+
+
+__all__ = ["Action", "CollectionSpec", "collect", "episode_id", "episode_path", "pending_indices"]

@@ -1,0 +1,163 @@
+"""One LeRobot v3.0 dataset per split, written with lerobot's own ``LeRobotDataset`` API (PNG frames, no video)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import multiprocessing as mp
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+
+from mor.data.episode_io import EpisodeData, read_episode  # noqa: E402
+from mor.data.manifest import SPLITS  # noqa: E402
+from mor.data.schema import MAX_OBJECTS, lerobot_features  # noqa: E402
+
+TASK_TEXT = "rearrange the objects to their targets"
+ROBOT_TYPE = "mor_turtlebot"
+BUILD_STAMP = "mor_build.json"
+
+
+def _padded(values: np.ndarray, fill: float, dtype: type) -> np.ndarray:
+    """Pad the object axis (first) of ``values`` to MAX_OBJECTS and flatten."""
+    out = np.full((MAX_OBJECTS, *values.shape[1:]), fill, dtype=dtype)
+    out[: len(values)] = values
+    return out.reshape(-1)
+
+
+def episode_frames(episode: EpisodeData) -> list[dict[str, np.ndarray | str]]:
+    """The LeRobot frames of one episode, in ``lerobot_features`` layout."""
+    header = episode.header
+    classes = _padded(header.object_classes, -1, np.int64)
+    targets = _padded(np.asarray(header.target_positions), 0.0, np.float32)
+    return [
+        {
+            "observation.image": episode.images[t],
+            "observation.object_classes": classes,
+            "observation.held": np.array([episode.held[t]], np.int64),
+            "observation.target_positions": targets,
+            "state.agent_pose": episode.agent_poses[t].astype(np.float32),
+            "state.object_positions": _padded(episode.object_positions[t], 0.0, np.float32),
+            "action": np.array([episode.actions[t]], np.int64),
+            "task": TASK_TEXT,
+        }
+        for t in range(episode.n_frames)
+    ]
+
+
+def _stamp(root: Path) -> dict:
+    stamp = root / BUILD_STAMP
+    return json.loads(stamp.read_text()) if stamp.is_file() else {}
+
+
+def write_lerobot_dataset(
+    episode_files: list[Path], root: Path, repo_id: str, stamp: dict, image_size: int, fps: float
+) -> Path:
+    """Write ``episode_files`` as one LeRobot dataset at ``root`` (under a temporary name, then renamed)."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy import
+
+    partial = root.with_name(root.name + ".partial")
+    shutil.rmtree(partial, ignore_errors=True)
+    dataset = LeRobotDataset.create(repo_id=repo_id, fps=int(round(fps)), root=partial,
+                                    features=lerobot_features(image_size), robot_type=ROBOT_TYPE, use_videos=False)
+    for path in episode_files:
+        for frame in episode_frames(read_episode(path)):
+            dataset.add_frame(frame)
+        dataset.save_episode()
+    dataset.finalize()
+    (partial / BUILD_STAMP).write_text(json.dumps(stamp) + "\n")
+    shutil.rmtree(root, ignore_errors=True)
+    partial.replace(root)
+    return root
+
+
+@dataclass(frozen=True)
+class ShardJob:
+    """A slice of one split, built as its own LeRobot dataset and aggregated afterwards."""
+
+    split: str
+    index: int
+    files: tuple[Path, ...]
+    root: Path
+    stamp: dict
+
+    def done(self) -> bool:
+        return _stamp(self.root) == self.stamp
+
+
+def _build_shard(job: ShardJob, image_size: int, fps: float) -> int:
+    os.environ.setdefault("HF_HUB_OFFLINE", "1")
+    write_lerobot_dataset(list(job.files), job.root, f"mor/{job.split}-shard{job.index:03d}", job.stamp,
+                          image_size, fps)
+    return len(job.files)
+
+
+def _shard_jobs(split: str, files: list[Path], hashes: list[str], shards_dir: Path, shard_episodes: int,
+                version: str) -> list[ShardJob]:
+    jobs = []
+    for index, start in enumerate(range(0, len(files), shard_episodes)):
+        chunk = files[start:start + shard_episodes]
+        content = hashlib.sha256("".join(hashes[start:start + shard_episodes]).encode()).hexdigest()[:16]
+        jobs.append(ShardJob(split, index, tuple(chunk), shards_dir / split / f"shard-{index:03d}",
+                             {"dataset_version": version, "split": split, "shard": index, "content": content,
+                              "episodes": len(chunk)}))
+    return jobs
+
+
+def build_splits(
+    manifest: list[dict], episodes_root: Path, out_root: Path, version: str, image_size: int, fps: float,
+    workers: int, shard_episodes: int = 100, progress: bool = True,
+) -> dict[str, int]:
+    """Build ``out_root/<split>`` for every split of ``manifest`` (rows as dicts); returns episodes per split.
+
+    Each split is built in shards of ``shard_episodes`` episodes, in ``workers`` processes, then aggregated with
+    lerobot's ``aggregate_datasets``. Finished shards and splits of the same version are kept, so an interrupted
+    build resumes where it stopped.
+    """
+    from lerobot.datasets.aggregate import aggregate_datasets  # noqa: PLC0415 - heavy import
+
+    shards_dir = out_root / ".shards"
+    counts: dict[str, int] = {}
+    jobs_by_split: dict[str, list[ShardJob]] = {}
+    for split in SPLITS:
+        rows = [row for row in manifest if row["split"] == split]
+        counts[split] = len(rows)
+        split_stamp = {"dataset_version": version, "split": split, "episodes": len(rows)}
+        if _stamp(out_root / split) == split_stamp:
+            continue
+        files = [episodes_root / row["file"] for row in rows]
+        jobs_by_split[split] = _shard_jobs(split, files, [row["sha256"] for row in rows], shards_dir,
+                                           shard_episodes, version)
+    pending = [job for jobs in jobs_by_split.values() for job in jobs if not job.done()]
+    total = sum(len(job.files) for jobs in jobs_by_split.values() for job in jobs)
+    with tqdm(total=total, initial=total - sum(len(j.files) for j in pending), desc="build", unit="ep",
+              disable=not progress) as bar:
+        if workers <= 1 or len(pending) <= 1:
+            for job in pending:
+                bar.update(_build_shard(job, image_size, fps))
+        else:
+            with mp.get_context("spawn").Pool(min(workers, len(pending))) as pool:
+                for done in pool.starmap(_build_shard, [(job, image_size, fps) for job in pending]):
+                    bar.update(done)
+    for split, jobs in jobs_by_split.items():
+        split_root = out_root / split
+        split_stamp = {"dataset_version": version, "split": split, "episodes": counts[split]}
+        partial = split_root.with_name(split + ".partial")
+        shutil.rmtree(partial, ignore_errors=True)
+        if jobs:
+            aggregate_datasets([f"mor/{split}-shard{job.index:03d}" for job in jobs], f"mor/{split}",
+                               roots=[job.root for job in jobs], aggr_root=partial)
+        else:
+            partial.mkdir(parents=True)
+        (partial / BUILD_STAMP).write_text(json.dumps(split_stamp) + "\n")
+        shutil.rmtree(split_root, ignore_errors=True)
+        partial.replace(split_root)
+        shutil.rmtree(shards_dir / split, ignore_errors=True)
+    shutil.rmtree(shards_dir, ignore_errors=True)
+    return counts

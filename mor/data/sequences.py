@@ -1,0 +1,76 @@
+"""A torch sequence loader for the L-Net: fixed-length windows of consecutive frames of one episode.
+
+It reads a split's LeRobot Parquet files directly (pyarrow), indexes every window that lies wholly inside one
+episode, and decodes a window's PNG frames only when it is asked for (so DataLoader workers share the work).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+import torch
+from torch.utils.data import Dataset
+
+from mor.data.episode_io import decode_png
+from mor.data.schema import MAX_OBJECTS
+
+_COLUMNS = ("observation.image", "observation.object_classes", "observation.held", "observation.target_positions",
+            "state.agent_pose", "state.object_positions", "action", "episode_index", "frame_index")
+
+
+class SequenceWindows(Dataset):
+    """Windows of ``window`` frames (every ``stride`` frames) of the LeRobot split at ``root``.
+
+    Item (T = window, K = MAX_OBJECTS = 5; metres, radians, world frame):
+      images (T, 3, H, W) float32 in [0, 1]; agent_pose (T, 3); object_positions (T, K, 2);
+      held (T,) int64 (-1 none); actions (T,) int64 (taken after each frame, -1 after the last);
+      object_classes (K,) int64 (-1 for absent slots); object_mask (K,) bool; target_positions (K, 2);
+      episode_index, start_frame: int64 scalars.
+    """
+
+    def __init__(self, root: Path, window: int, stride: int = 1) -> None:
+        if window < 1 or stride < 1:
+            raise ValueError(f"window ({window}) and stride ({stride}) must be >= 1")
+        files = sorted(Path(root).glob("data/*/*.parquet"))
+        if not files:
+            raise FileNotFoundError(f"{root}: no data/*/*.parquet; build the split with mor build-dataset")
+        self.table = pq.ParquetDataset(files).read(columns=list(_COLUMNS)).combine_chunks()
+        self.window = window
+        episodes = self.table["episode_index"].to_numpy()
+        self._labels = {
+            "agent_pose": np.stack(self.table["state.agent_pose"].to_numpy(zero_copy_only=False)).astype(np.float32),
+            "object_positions": np.stack(self.table["state.object_positions"].to_numpy(zero_copy_only=False))
+            .astype(np.float32).reshape(-1, MAX_OBJECTS, 2),
+            "held": self.table["observation.held"].to_numpy().astype(np.int64),
+            "actions": self.table["action"].to_numpy().astype(np.int64),
+        }
+        self._classes = np.stack(self.table["observation.object_classes"].to_numpy(zero_copy_only=False))
+        self._targets = np.stack(self.table["observation.target_positions"].to_numpy(zero_copy_only=False)) \
+            .astype(np.float32).reshape(-1, MAX_OBJECTS, 2)
+        self._images = pc.struct_field(self.table["observation.image"], "bytes")
+        self._episodes = episodes
+        self._frames = self.table["frame_index"].to_numpy()
+        starts = []
+        boundaries = np.flatnonzero(np.diff(episodes)) + 1
+        for first, end in zip(np.r_[0, boundaries], np.r_[boundaries, len(episodes)], strict=True):
+            starts.extend(range(first, end - window + 1, stride))
+        self.starts = np.asarray(starts, dtype=np.int64)
+
+    def __len__(self) -> int:
+        return len(self.starts)
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        start = int(self.starts[index])
+        rows = slice(start, start + self.window)
+        images = np.stack([decode_png(self._images[i].as_py()) for i in range(start, start + self.window)])
+        item = {name: torch.from_numpy(values[rows].copy()) for name, values in self._labels.items()}
+        item["images"] = torch.from_numpy(images).permute(0, 3, 1, 2).float().div_(255.0)
+        item["object_classes"] = torch.from_numpy(self._classes[start].copy())
+        item["object_mask"] = item["object_classes"] >= 0
+        item["target_positions"] = torch.from_numpy(self._targets[start].copy())
+        item["episode_index"] = torch.tensor(int(self._episodes[start]))
+        item["start_frame"] = torch.tensor(int(self._frames[start]))
+        return item
