@@ -16,7 +16,7 @@ $(BIN)/.installed: pyproject.toml
 	@ldconfig -p | grep -q 'libEGL.so.1' || { echo "installing Mesa EGL for headless rendering"; apt-get update -qq && apt-get install -y -qq libegl1 libgl1-mesa-dri >/dev/null; }
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev]'
+	$(BIN)/pip install --quiet -e '.[dev,bench]'
 	touch $@
 
 install: $(BIN)/.installed

@@ -160,8 +160,7 @@ def build_dataset_command(
     """Write the manifest, one LeRobot dataset per split (8:1:1) and the dataset card."""
     from pipelines import build
 
-    result = build.run(load_profile(profile, params), paths.EPISODES, paths.MANIFEST, paths.LEROBOT,
-                       paths.DATASET_CARD, workers)
+    result = build.run(load_profile(profile, params), workers)
     typer.echo(f"dataset {result['dataset_version']}: {result['episodes']} episodes per split in {paths.LEROBOT}; "
                f"card {result['card']}")
 
@@ -172,13 +171,52 @@ def validate_command() -> None:
     """Check every episode file and split against the manifest; exit 1 if anything is wrong."""
     from pipelines import validate
 
-    report = validate.run(paths.MANIFEST, paths.EPISODES, paths.LEROBOT, paths.VALIDATION_REPORT)
+    report = validate.run()
     for problem in report.problems:
         typer.echo(problem, err=True)
     typer.echo(f"checked {report.episodes_checked} episodes: {len(report.rejected)} rejected; "
                f"splits {report.splits}; report {paths.VALIDATION_REPORT}")
     if not report.ok:
         raise typer.Exit(1)
+
+
+@app.command("import-real")
+@one_line_errors
+def import_real_command(
+    bag: Annotated[Path, typer.Argument(help="A ROS 2 rosbag2 recording: an .mcap file or its folder.")],
+    object_classes: Annotated[str, typer.Option(help="Class id of each object, comma-separated (e.g. 0,7,13).")],
+    targets: Annotated[str, typer.Option(help="Target x,y of each object in metres, ';'-separated.")],
+    episode_id: Annotated[str | None, typer.Option(help="Episode id (default: real-<bag name>).")] = None,
+    out_dir: Annotated[Path, typer.Option(help="Folder of real episode files.")] = paths.REAL_EPISODES,
+    fps: Annotated[float, typer.Option(help="Frame rate to resample onto.")] = 10.0,
+    image_size: Annotated[int, typer.Option(help="Square image side, pixels (match the simulated data).")] = 64,
+    image_topic: Annotated[str, typer.Option(help="sensor_msgs/CompressedImage topic.")] = "/camera/image_raw/compressed",
+    agent_pose_topic: Annotated[str, typer.Option(help="Robot PoseStamped topic (ArUco tracker).")] = (
+        "/tracker/robot_pose"),
+    object_pose_topic: Annotated[str, typer.Option(help="Object PoseStamped topics, with {i} for the index.")] = (
+        "/tracker/object_{i}/pose"),
+    action_topic: Annotated[str, typer.Option(help="Executed-action topic ('' to use cmd_vel).")] = "/mor/action",
+    cmd_vel_topic: Annotated[str, typer.Option(help="Twist topic used when there is no action topic.")] = "/cmd_vel",
+    held_topic: Annotated[str, typer.Option(help="Held-object Int32 topic ('' for none).")] = "/mor/held",
+    timestamps: Annotated[str, typer.Option(help="log (receive time) or header (message stamps).")] = "log",
+) -> None:
+    """Convert a real TurtleBot run into an episode MCAP; `mor build-dataset` then includes it (source=real)."""
+    from mor.data.real import import_rosbag, make_import_params, make_real_topics
+
+    topics = make_real_topics(
+        "import-real", image=image_topic, agent_pose=agent_pose_topic, object_pose=object_pose_topic,
+        action=action_topic or None, cmd_vel=cmd_vel_topic or None, held=held_topic or None,
+    )
+    try:
+        classes = [int(c) for c in object_classes.split(",")]
+        target_list = [tuple(float(v) for v in pair.split(",")) for pair in targets.split(";")]
+    except ValueError:
+        raise ConfigError("--object-classes/--targets: expected e.g. --object-classes 0,7 --targets '1,2;-1,0.5'") from None
+    import_params = make_import_params(
+        "import-real", n_objects=len(classes), object_classes=classes, target_positions=target_list,
+        episode_id=episode_id, fps=fps, image_size=image_size, timestamps=timestamps,
+    )
+    typer.echo(f"wrote {import_rosbag(bag, out_dir, topics, import_params)}")
 
 
 @bench_app.command("sim")
@@ -200,7 +238,8 @@ def bench_sim(
     env_ids = [TASKS[_check_task(name)][0] for name in (task or ["rearrange"])]
     result = benchmark_sim(env_ids, steps, repeats, workers, {"image_size": image_size})
     for env_id, numbers in result["results"].items():
-        typer.echo(f"{env_id}: " + ", ".join(f"{k} {v:.0f}" for k, v in numbers.items() if not k.startswith("runs")))
+        typer.echo(f"{env_id}: " + ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
+                                            for k, v in numbers.items() if not k.startswith("runs")))
     typer.echo(f"wrote {write_json(out, result)}")
 
 

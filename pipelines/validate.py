@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from mor.data.manifest import read_manifest
 from mor.data.validate import ValidationReport, validate
+from pipelines import paths
 from pipelines.io import write_json
 
 
-def run(manifest_path: Path, episodes_dir: Path, datasets_root: Path, report_path: Path) -> ValidationReport:
-    report = validate(read_manifest(manifest_path).to_pylist(), episodes_dir, datasets_root)
-    write_json(report_path, report.to_json())
+def run() -> ValidationReport:
+    """Validate the manifest's episodes and splits; write the report (also when problems were found)."""
+    report = validate(read_manifest(paths.MANIFEST).to_pylist(), paths.DATASETS, paths.EPISODE_FOLDERS, paths.LEROBOT)
+    write_json(paths.VALIDATION_REPORT, report.to_json())
     return report

@@ -41,20 +41,20 @@ class ValidationReport:
 def check_episode_file(path: Path, expected_sha256: str, expected_frames: int) -> str | None:
     """None if ``path`` is a whole, indexed episode matching the manifest; else what is wrong (one line)."""
     if not path.is_file():
-        return f"{path}: missing; re-collect it (mor collect --rejected-from <report>)"
+        return f"{path}: missing; re-collect (mor collect) or re-import (mor import-real) it"
     try:
         with open(path, "rb") as stream:
             reader = make_reader(stream)
             summary = reader.get_summary()
             if summary is None or summary.statistics is None or not summary.chunk_indexes:
-                return f"{path}: no summary or chunk index (truncated?); re-collect it"
+                return f"{path}: no summary or chunk index (truncated?); re-collect (sim) or re-import (real) it"
             counts = {summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()}
             metadata = {m.name: m.metadata for m in reader.iter_metadata()}.get("episode", {})
     except (McapError, OSError, ValueError, EOFError, KeyError) as error:
-        return f"{path}: unreadable MCAP ({type(error).__name__}: {error}); re-collect it"
+        return f"{path}: unreadable MCAP ({type(error).__name__}: {error}); re-collect (sim) or re-import (real) it"
     missing = [topic for topic in schema.ALL_TOPICS if topic not in counts]
     if missing:
-        return f"{path}: missing channels {', '.join(missing)}; re-collect it"
+        return f"{path}: missing channels {', '.join(missing)}; re-collect (sim) or re-import (real) it"
     frames = int(metadata.get("n_frames", -1))
     uneven = {t: counts[t] for t in schema.PER_FRAME_TOPICS if counts[t] != frames}
     if frames != expected_frames or uneven:
@@ -81,8 +81,10 @@ def check_split(root: Path, split: str, episodes: int, frames: int) -> tuple[dic
     return found, None
 
 
-def validate(manifest: list[dict], episodes_root: Path, datasets_root: Path, progress: bool = True) -> ValidationReport:
-    """Check every manifest episode and every split; returns the report (does not raise on bad data)."""
+def validate(manifest: list[dict], episodes_root: Path, episode_folders: tuple[Path, ...], datasets_root: Path,
+             progress: bool = True) -> ValidationReport:
+    """Check every manifest episode (paths relative to ``episodes_root``), that every episode file in
+    ``episode_folders`` is in the manifest, and every split; returns the report (does not raise on bad data)."""
     report = ValidationReport()
     for row in tqdm(manifest, desc="validate", unit="ep", disable=not progress):
         problem = check_episode_file(episodes_root / row["file"], row["sha256"], row["n_frames"])
@@ -91,7 +93,7 @@ def validate(manifest: list[dict], episodes_root: Path, datasets_root: Path, pro
             report.problems.append(problem)
             report.rejected.append(row["file"])
     listed = {row["file"] for row in manifest}
-    for path in sorted(episodes_root.glob("*.mcap")):
+    for path in sorted(p for folder in episode_folders for p in folder.glob("*.mcap")):
         if str(path.relative_to(episodes_root)) not in listed:
             report.problems.append(f"{path}: not in the manifest; run mor build-dataset to include it")
     for split in SPLITS:

@@ -1,4 +1,8 @@
-"""``mor bench sim``: environment steps per second with rendering, in one process and one worker per core."""
+"""``mor bench sim``: environment steps per second with rendering, in one process and one worker per core.
+
+Every measurement runs in fresh spawned processes with one llvmpipe render thread each (LP_NUM_THREADS=1), ours
+and MiniWorld's alike, and times only the stepping (start-up and warm-up excluded).
+"""
 
 from __future__ import annotations
 
@@ -62,13 +66,50 @@ def _parallel_steps_per_second(env_id: str, steps: int, workers: int, env_kwargs
     return float(sum(rates))
 
 
+MINIWORLD_ENV = "MiniWorld-PickupObjects-v0"
+
+
+def _miniworld_worker(steps: int, seed: int, results: Any) -> None:
+    """MiniWorld's PickupObjects at 64x64, random actions, in its own process (pyglet must go headless first)."""
+    os.environ.setdefault("LP_NUM_THREADS", "1")  # the same render settings as our workers
+    try:
+        import pyglet  # noqa: PLC0415
+
+        pyglet.options["headless"] = True
+        import miniworld  # noqa: F401, PLC0415 - registers the envs
+    except ImportError as error:
+        results.put(f"miniworld not installed ({error}); pip install 'mor[bench]'")
+        return
+    env = gym.make(MINIWORLD_ENV, obs_width=64, obs_height=64)
+    env.action_space.seed(seed)
+    env.reset(seed=seed)
+    start = time.perf_counter()
+    for _ in range(steps):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            env.reset()
+    results.put(steps / (time.perf_counter() - start))
+    env.close()
+
+
+def miniworld_steps_per_second(steps: int, seed: int) -> float | str:
+    """MiniWorld PickupObjects steps/s (one process), or why it could not run."""
+    context = mp.get_context("spawn")
+    results = context.Queue()
+    process = context.Process(target=_miniworld_worker, args=(steps, seed, results))
+    process.start()
+    outcome = results.get()
+    process.join()
+    return outcome
+
+
 def benchmark_sim(
     env_ids: list[str], steps: int, repeats: int, workers: int, env_kwargs: dict[str, Any]
 ) -> dict[str, Any]:
     """Median over ``repeats`` of single-process and ``workers``-process steps/s for each env."""
     results: dict[str, Any] = {}
     for env_id in env_ids:
-        single = [_steps_per_second(env_id, steps, seed, env_kwargs) for seed in range(repeats)]
+        single = [_parallel_steps_per_second(env_id, steps, 1, env_kwargs) for _ in range(repeats)]
         parallel = [_parallel_steps_per_second(env_id, steps, workers, env_kwargs) for _ in range(repeats)]
         results[env_id] = {
             "single_process_steps_per_s": statistics.median(single),
@@ -76,9 +117,17 @@ def benchmark_sim(
             "runs_single": single,
             "runs_parallel": parallel,
         }
+    peer = [miniworld_steps_per_second(steps, seed) for seed in range(repeats)]
+    if all(isinstance(rate, float) for rate in peer):
+        results[MINIWORLD_ENV] = {"single_process_steps_per_s": statistics.median(peer), "runs_single": peer}
+        for env_id in env_ids:
+            results[env_id]["speedup_vs_miniworld"] = (
+                results[env_id]["single_process_steps_per_s"] / results[MINIWORLD_ENV]["single_process_steps_per_s"])
+    else:
+        results[MINIWORLD_ENV] = {"unavailable": next(r for r in peer if isinstance(r, str))}
     return {
         "benchmark": "sim",
-        "policy": "random (uniform over unmasked actions), resets included",
+        "policy": "random (uniform over unmasked actions; MiniWorld: uniform), resets included",
         "steps_per_run": steps,
         "repeats": repeats,
         "workers": workers,

@@ -1,0 +1,36 @@
+"""The L-Net's sequence loader: windows inside one episode, labels aligned with frames."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from torch.utils.data import DataLoader
+
+from mor.data.episode_io import read_episode
+from mor.data.sequences import SequenceWindows
+
+
+def test_windows_stay_inside_episodes_and_match_records(tiny_dataset: tuple, tiny_collection: Path) -> None:
+    _, root, rows = tiny_dataset
+    train_rows = [r for r in rows if r["split"] == "train"]
+    windows = SequenceWindows(root / "train", window=8, stride=4)
+    per_episode = sum(len(range(0, r["n_frames"] - 8 + 1, 4)) for r in train_rows)
+    assert len(windows) == per_episode
+    item = windows[1]
+    assert item["images"].shape == (8, 3, 16, 16)
+    assert item["agent_pose"].shape == (8, 3) and item["object_positions"].shape == (8, 5, 2)
+    assert int(item["start_frame"]) == 4
+    episode = read_episode(tiny_collection / train_rows[int(item["episode_index"])]["file"])
+    np.testing.assert_allclose(item["agent_pose"].numpy(), episode.agent_poses[4:12], atol=1e-5)
+    np.testing.assert_array_equal(item["actions"].numpy(), episode.actions[4:12])
+    n = len(episode.header.object_classes)
+    assert item["object_mask"].tolist() == [True] * n + [False] * (5 - n)
+    batch = next(iter(DataLoader(windows, batch_size=3)))
+    assert batch["images"].shape == (3, 8, 3, 16, 16)
+
+
+def test_missing_split_is_a_clear_error(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match="mor build-dataset"):
+        SequenceWindows(tmp_path, window=4)
