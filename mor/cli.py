@@ -219,6 +219,44 @@ def import_real_command(
     typer.echo(f"wrote {import_rosbag(bag, out_dir, topics, import_params)}")
 
 
+@app.command("train-lnet")
+@one_line_errors
+def train_lnet_command(profile: ProfileOption = "default", params: ParamsOption = DEFAULT_PARAMS) -> None:
+    """Train the L-Net on the train split (early stopping on validation); resumes from its last checkpoint."""
+    from pipelines import train_lnet
+
+    summary = train_lnet.run(load_profile(profile, params))
+    typer.echo(f"trained {summary['steps']} steps on {summary['device']}; best validation loss "
+               f"{summary['best_validation_loss']:.3f}; outputs in {paths.LNET}")
+
+
+@app.command("calibrate-lnet")
+@one_line_errors
+def calibrate_lnet_command(profile: ProfileOption = "default", params: ParamsOption = DEFAULT_PARAMS) -> None:
+    """Fit the uncertainty scales of the trained L-Net on the validation split."""
+    from pipelines import calibrate_lnet
+
+    result = calibrate_lnet.run(load_profile(profile, params))
+    typer.echo(f"agent sigma x{result['agent_scale']:.3f}, objects sigma x{result['object_scale']:.3f}, "
+               f"kappa x{result['kappa_scale']:.3f}; wrote {paths.LNET_CALIBRATION}")
+
+
+@app.command("eval-lnet")
+@one_line_errors
+def eval_lnet_command(profile: ProfileOption = "default", params: ParamsOption = DEFAULT_PARAMS) -> None:
+    """Evaluate the L-Net on the test split before and after calibration; write figures and the model card."""
+    from pipelines import eval_lnet
+
+    result = eval_lnet.run(load_profile(profile, params))
+    for when in ("before_calibration", "after_calibration"):
+        m = result[when]
+        typer.echo(f"{when}: agent {m['agent_position_error_m']['median']:.3f} m, heading "
+                   f"{m['heading_error_deg']['median']:.2f} deg, seen objects "
+                   f"{m['object_position_error_m']['seen']['median']:.3f} m (medians); 2-sigma coverage agent "
+                   f"{m['coverage']['agent_position']['2sigma']:.3f}, objects {m['coverage']['objects_seen']['2sigma']:.3f}")
+    typer.echo(f"wrote {paths.LNET_CARD}")
+
+
 @bench_app.command("sim")
 @one_line_errors
 def bench_sim(
@@ -266,6 +304,25 @@ def bench_collect(
     projection = result["paper_profile_projection"]
     typer.echo(f"{result['bytes_per_frame']:.0f} bytes/frame; paper profile ({projection['episodes']} episodes): "
                f"{projection['hours']:.2f} h, {projection['disk_gb']:.1f} GB")
+    typer.echo(f"wrote {write_json(out, result)}")
+
+
+@bench_app.command("lnet")
+@one_line_errors
+def bench_lnet(
+    repeats: Annotated[int, typer.Option(help="Timed runs per batch size; the median is reported.")] = 5,
+    out: Annotated[Path, typer.Option(help="JSON to write.")] = Path("datasets/bench/lnet.json"),
+    profile: ProfileOption = "default",
+    params: ParamsOption = DEFAULT_PARAMS,
+) -> None:
+    """L-Net inference frames/s (PoseNet + one LSTM step) at batch 1 and 64 on the CPU."""
+    from mor.lnet.bench import benchmark_lnet
+    from pipelines.io import write_json
+
+    config = load_profile(profile, params)
+    result = benchmark_lnet(config.lnet.model, config.sim.image_size, [1, 64], repeats)
+    for name, entry in result["results"].items():
+        typer.echo(f"{name}: {entry['frames_per_s']:.0f} frames/s")
     typer.echo(f"wrote {write_json(out, result)}")
 
 

@@ -10,6 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from mor.data.exploration import ExplorationParams
 from mor.errors import ConfigError
+from mor.lnet.params import LNetParams
 from mor.sim.config import SimConfig, format_validation_error
 
 DEFAULT_PARAMS = Path("params.yaml")
@@ -63,6 +64,7 @@ class Profile(_Strict):
     demo: DemoParams = Field(default_factory=DemoParams)
     collect: CollectParams = Field(default_factory=CollectParams)
     build: BuildParams = Field(default_factory=BuildParams)
+    lnet: LNetParams = Field(default_factory=LNetParams)
 
 
 def load_profile(name: str, path: Path = DEFAULT_PARAMS) -> Profile:

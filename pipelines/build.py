@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 from mor.config import Profile
@@ -23,5 +24,6 @@ def run(profile: Profile, workers: int | None = None) -> dict[str, Any]:
                           profile.collect.fps, workers or profile.build.workers, profile.build.shard_episodes)
     arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
     card = write_dataset_card(paths.MANIFEST, paths.DATASETS, paths.DATASET_CARD, profile.model_dump(mode="json"),
-                              arena)
+                              arena, datasets_root_rel=os.path.relpath(paths.LEROBOT, paths.DATASET_CARD),
+                              workers=workers or profile.build.workers)
     return {"dataset_version": version, "episodes": counts, "card": str(card)}

@@ -14,3 +14,6 @@ DATASET_CARD = Path("cards/dataset")
 VALIDATION_REPORT = DATASETS / "validation" / "report.json"
 COLLECT_STATS = DATASETS / "collect_stats.json"
 EPISODE_FOLDERS = (EPISODES, REAL_EPISODES)
+LNET = DATASETS / "lnet"                  # training run: checkpoint.pt (resume), model.pt (best), log.csv
+LNET_CALIBRATION = LNET / "calibration.json"
+LNET_CARD = Path("cards/lnet")            # model card, committed weights, metrics and figures

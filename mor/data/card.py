@@ -56,6 +56,7 @@ FRAME_TILE: int = 128
 LICENSE = "apache-2.0"
 TAGS: tuple[str, ...] = ("LeRobot", "mor", "mobile-manipulation", "localization", "mujoco")
 _DPI = 110
+SIM_SOURCE = "sim"
 
 #: Units and meaning of each LeRobot feature (``mor.data.schema.lerobot_features``).
 FEATURE_UNITS: dict[str, tuple[str, str]] = {
@@ -468,6 +469,8 @@ class CardStats:
     band_width: float  # metres: the wall band of the two figures below
     band_frame_share: float  # share of frames in the cells whose centre is within band_width of a wall
     band_cell_share: float  # share of the inside cells that are in that band
+    coverage_episodes: int = 0  # episodes in the coverage statistics
+    coverage_sim_only: bool = False  # whether real episodes were left out of them
     recorded_params: list[tuple[str, int]] = field(default_factory=list)  # (params JSON, episodes), most first
     image_size: int | None = None
     frame_captions: list[tuple[str, list[int]]] = field(default_factory=list)
@@ -505,7 +508,10 @@ def compute_stats(manifest_path: Path, episodes_root: Path, arena: Arena, cell_s
     except (KeyError, TypeError):
         raise CardError(f"{manifest_path}: no dataset_version in the manifest's metadata; rebuild it") from None
     summaries = summarize_files([Path(episodes_root) / row["file"] for row in rows], workers, progress)
-    counts, extent = coverage_counts((s.positions for s in summaries), arena, cell_size)
+    # Coverage is the evidence for the random-action scheme, which drives the simulator only: real runs (another
+    # arena, another policy) are left out when there are simulated episodes.
+    covered = [s for s in summaries if s.source == SIM_SOURCE] or summaries
+    counts, extent = coverage_counts((s.positions for s in covered), arena, cell_size)
     inside = inside_mask(counts.shape, extent, arena)
     clearance = cell_clearance(counts.shape, extent, arena)
     interior = clearance >= cell_size
@@ -515,8 +521,9 @@ def compute_stats(manifest_path: Path, episodes_root: Path, arena: Arena, cell_s
         version=version, rows=rows, summaries=summaries, counts=counts, extent=extent, cell_size=cell_size,
         coverage_fraction=coverage_fraction(counts, extent, arena), inside_cells=int(np.count_nonzero(inside)),
         visited_cells=int(np.count_nonzero(inside & (counts > 0))),
-        median_mean_displacement=float(np.median([s.mean_displacement for s in summaries])),
-        median_max_displacement=float(np.median([s.max_displacement for s in summaries])),
+        median_mean_displacement=float(np.median([s.mean_displacement for s in covered])),
+        median_max_displacement=float(np.median([s.max_displacement for s in covered])),
+        coverage_episodes=len(covered), coverage_sim_only=len(covered) < len(summaries),
         classes=class_histogram(summaries), textures=texture_histograms(summaries),
         interior_fraction=float(np.count_nonzero(interior & (counts > 0)) / max(1, np.count_nonzero(interior))),
         interior_cells=int(np.count_nonzero(interior)), band_width=band_width,
@@ -657,6 +664,8 @@ def render_card(stats: CardStats, params: dict[str, Any], datasets_root_rel: str
     n_objects = sorted({len(s.object_classes) for s in stats.summaries})
     n_sim = sources.get("sim", (0, 0))[0]
     never = stats.inside_cells - stats.visited_cells
+    covered = ("simulated episodes (real runs left out: the random-action scheme drives only the simulator)"
+               if stats.coverage_sim_only else "episodes")
     lines = [
         "---", yaml_text.rstrip(), "---", "",
         "# MOR random-exploration dataset", "",
@@ -698,7 +707,8 @@ def render_card(stats: CardStats, params: dict[str, Any], datasets_root_rel: str
         lines.append("No episode image could be read, so the image size (and the feature shapes) is unknown.")
     lines += [""] + _event_section(stats) + ["", "## Coverage", ""]
     lines += [
-        f"Agent positions over all {int(stats.counts.sum())} frames on a {stats.cell_size:g} m grid over the "
+        f"Agent positions over all {int(stats.counts.sum())} frames of {stats.coverage_episodes} {covered} "
+        f"on a {stats.cell_size:g} m grid over the "
         f"arena's bounding box ({stats.extent[1] - stats.extent[0]:g} m x {stats.extent[3] - stats.extent[2]:g} m). "
         f"Visited at least once: {stats.visited_cells} of the {stats.inside_cells} cells whose centre is inside "
         f"the arena, a **coverage fraction of {stats.coverage_fraction:.3f}**. The median over episodes of the "

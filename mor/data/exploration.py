@@ -29,7 +29,7 @@ class ExplorationParams(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     mean_run_steps: float = Field(10.0, ge=1.0, description="mean MOVEs per run (geometric)")
-    max_turn_steps: int = Field(18, ge=1, le=36, description="turns between runs ~ U{1..max}")
+    max_turn_steps: int = Field(9, ge=1, le=36, description="turns between runs ~ U{1..max} (9: at most 90 deg)")
     pick_probability: float = Field(0.5, ge=0.0, le=1.0, description="P(PICK) per step when one is possible")
     drop_probability: float = Field(0.08, ge=0.0, le=1.0, description="P(DROP) per step while carrying")
     min_carry_steps: int = Field(5, ge=0, description="steps to carry before a DROP")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import multiprocessing as mp
 import os
 import shutil
@@ -14,6 +15,8 @@ import numpy as np
 from tqdm import tqdm
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
+# lerobot warns on import that torchcodec is missing; image datasets never decode video, so say it once, not per shard.
+logging.getLogger("lerobot.utils.import_utils").setLevel(logging.ERROR)
 
 from mor.data.episode_io import EpisodeData, read_episode  # noqa: E402
 from mor.data.manifest import SPLITS  # noqa: E402
@@ -93,9 +96,16 @@ class ShardJob:
 
 def _build_shard(job: ShardJob, image_size: int, fps: float) -> int:
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
+    from datasets.utils.logging import disable_progress_bar  # noqa: PLC0415
+
+    disable_progress_bar()  # one bar per episode from lerobot's internals drowns ours
     write_lerobot_dataset(list(job.files), job.root, f"mor/{job.split}-shard{job.index:03d}", job.stamp,
                           image_size, fps)
     return len(job.files)
+
+
+def _build_shard_job(args: tuple[ShardJob, int, float]) -> int:
+    return _build_shard(*args)
 
 
 def _shard_jobs(split: str, files: list[Path], hashes: list[str], shards_dir: Path, shard_episodes: int,
@@ -143,7 +153,7 @@ def build_splits(
                 bar.update(_build_shard(job, image_size, fps))
         else:
             with mp.get_context("spawn").Pool(min(workers, len(pending))) as pool:
-                for done in pool.starmap(_build_shard, [(job, image_size, fps) for job in pending]):
+                for done in pool.imap_unordered(_build_shard_job, [(job, image_size, fps) for job in pending]):
                     bar.update(done)
     for split, jobs in jobs_by_split.items():
         split_root = out_root / split
@@ -151,8 +161,10 @@ def build_splits(
         partial = split_root.with_name(split + ".partial")
         shutil.rmtree(partial, ignore_errors=True)
         if jobs:
+            # One Parquet file per shard: concatenating image tables re-reads and rewrites the growing file for
+            # every shard (quadratic), while a new file per shard is linear and loads the same way.
             aggregate_datasets([f"mor/{split}-shard{job.index:03d}" for job in jobs], f"mor/{split}",
-                               roots=[job.root for job in jobs], aggr_root=partial)
+                               roots=[job.root for job in jobs], aggr_root=partial, concatenate_data=False)
         else:
             partial.mkdir(parents=True)
         (partial / BUILD_STAMP).write_text(json.dumps(split_stamp) + "\n")

@@ -22,7 +22,8 @@ _COLUMNS = ("observation.image", "observation.object_classes", "observation.held
 
 
 class SequenceWindows(Dataset):
-    """Windows of ``window`` frames (every ``stride`` frames) of the LeRobot split at ``root``.
+    """Windows of ``window`` frames (every ``stride`` frames) of the LeRobot split at ``root``; with
+    ``window=None``, one item per whole episode (lengths may differ: use batch_size=1).
 
     Item (T = window, K = MAX_OBJECTS = 5; metres, radians, world frame):
       images (T, 3, H, W) float32 in [0, 1]; agent_pose (T, 3); object_positions (T, K, 2);
@@ -31,14 +32,15 @@ class SequenceWindows(Dataset):
       episode_index, start_frame: int64 scalars.
     """
 
-    def __init__(self, root: Path, window: int, stride: int = 1) -> None:
-        if window < 1 or stride < 1:
+    def __init__(self, root: Path, window: int | None, stride: int = 1) -> None:
+        if (window is not None and window < 1) or stride < 1:
             raise ValueError(f"window ({window}) and stride ({stride}) must be >= 1")
         files = sorted(Path(root).glob("data/*/*.parquet"))
         if not files:
             raise FileNotFoundError(f"{root}: no data/*/*.parquet; build the split with mor build-dataset")
         self.table = pq.ParquetDataset(files).read(columns=list(_COLUMNS)).combine_chunks()
-        self.window = window
+        first_image = decode_png(pc.struct_field(self.table["observation.image"], "bytes")[0].as_py())
+        self.image_size = int(first_image.shape[0])
         episodes = self.table["episode_index"].to_numpy()
         self._labels = {
             "agent_pose": np.stack(self.table["state.agent_pose"].to_numpy(zero_copy_only=False)).astype(np.float32),
@@ -53,19 +55,24 @@ class SequenceWindows(Dataset):
         self._images = pc.struct_field(self.table["observation.image"], "bytes")
         self._episodes = episodes
         self._frames = self.table["frame_index"].to_numpy()
-        starts = []
+        starts, lengths = [], []
         boundaries = np.flatnonzero(np.diff(episodes)) + 1
         for first, end in zip(np.r_[0, boundaries], np.r_[boundaries, len(episodes)], strict=True):
-            starts.extend(range(first, end - window + 1, stride))
+            if window is None:
+                starts.append(first)
+                lengths.append(end - first)
+            else:
+                starts.extend(range(first, end - window + 1, stride))
         self.starts = np.asarray(starts, dtype=np.int64)
+        self.lengths = np.asarray(lengths, dtype=np.int64) if window is None else np.full(len(starts), window)
 
     def __len__(self) -> int:
         return len(self.starts)
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
-        start = int(self.starts[index])
-        rows = slice(start, start + self.window)
-        images = np.stack([decode_png(self._images[i].as_py()) for i in range(start, start + self.window)])
+        start, length = int(self.starts[index]), int(self.lengths[index])
+        rows = slice(start, start + length)
+        images = np.stack([decode_png(self._images[i].as_py()) for i in range(start, start + length)])
         item = {name: torch.from_numpy(values[rows].copy()) for name, values in self._labels.items()}
         item["images"] = torch.from_numpy(images).permute(0, 3, 1, 2).float().div_(255.0)
         item["object_classes"] = torch.from_numpy(self._classes[start].copy())

@@ -84,7 +84,7 @@ class Arena:
         x, y = self.vertex_array.T
         return float(0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
 
-    def sample_point(self, rng: np.random.Generator, margin: float, max_tries: int = 1000) -> Array | None:
+    def sample_point(self, rng: np.random.Generator, margin: float, max_tries: int = 200) -> Array | None:
         """A uniform point at least ``margin`` from every wall, or None after ``max_tries`` rejections."""
         low, high = self.vertex_array.min(axis=0), self.vertex_array.max(axis=0)
         for _ in range(max_tries):

@@ -21,6 +21,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from mor.errors import ConfigError
 from mor.sim.arena import Arena
 from mor.sim.catalog import N_CLASSES
 from mor.sim.config import SimConfig, make_sim_config
@@ -53,7 +54,9 @@ class MOREnv(gym.Env[Observation, int]):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode: {render_mode!r} is not supported; use 'rgb_array' or None")
         self.render_mode = render_mode
-        self.horizon = int(horizon or self.default_horizon)
+        if horizon is not None and int(horizon) < 1:
+            raise ConfigError(f"horizon: must be at least 1 step (got {horizon!r})")
+        self.horizon = int(horizon) if horizon is not None else self.default_horizon
         self.arena = Arena.build(self.config.arena, self.config.arena_size)
         self.noise = MotionNoise()
         # Fail at construction, not at the first reset, when the objects cannot fit.

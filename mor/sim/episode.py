@@ -21,7 +21,7 @@ OBJECT_SEPARATION: float = 0.6
 TARGET_MIN_DISTANCE: float = SUCCESS_RADIUS + 0.5
 #: The agent spawns at least this far (metres) from walls and, beyond its and the objects' radii, from objects.
 SPAWN_CLEARANCE: float = 0.2
-_MAX_LAYOUT_TRIES: int = 200
+_MAX_LAYOUT_TRIES: int = 50
 
 
 @dataclass(frozen=True)

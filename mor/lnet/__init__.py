@@ -1,0 +1,1 @@
+"""The localization network (L-Net): poses of the agent and the objects, with calibrated uncertainty, from RGB."""

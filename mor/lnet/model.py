@@ -1,0 +1,161 @@
+"""The L-Net: a PoseNet f(o_t, c) per frame and an LSTM g(h_t, s_ego_t) over time (paper section 4.1).
+
+Shapes: B batch, T time, K = 5 object slots (absent slots have class -1 and are masked), images (3, H, W) in
+[0, 1]. Positions in metres, angles in radians; world frame and ego frame as in DESIGN.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import torch
+from torch import nn
+
+from mor.data.schema import MAX_OBJECTS
+from mor.lnet.frames import ego_to_world
+from mor.lnet.likelihoods import MIN_KAPPA, positive, scale_tril
+from mor.lnet.params import LNetConfig
+from mor.sim.catalog import N_CLASSES
+from mor.sim.rules import N_ACTIONS
+
+K = MAX_OBJECTS
+_ABSENT = N_CLASSES  # embedding index of an absent slot
+_NO_ACTION = N_ACTIONS  # one-hot index of "no previous action"
+
+
+@dataclass
+class PoseEstimate:
+    """Distributions over poses; leading dims (...) are (B, T) or (N,).
+
+    agent_mean (..., 2) world; agent_tril (..., 2, 2); heading (...) and kappa (...) of a von Mises;
+    object_mean (..., K, 2), object_tril (..., K, 2, 2) in ``frame`` ("ego" for the PoseNet, "world" for the LSTM).
+    """
+
+    agent_mean: torch.Tensor
+    agent_tril: torch.Tensor
+    heading: torch.Tensor
+    kappa: torch.Tensor
+    object_mean: torch.Tensor
+    object_tril: torch.Tensor
+    frame: str
+
+    def to_numpy(self) -> dict[str, object]:
+        return {name: getattr(self, name).detach().cpu().numpy() for name in
+                ("agent_mean", "agent_tril", "heading", "kappa", "object_mean", "object_tril")}
+
+
+def _mlp(inputs: int, hidden: int, outputs: int) -> nn.Sequential:
+    """The paper's 3-layer MLP."""
+    return nn.Sequential(nn.Linear(inputs, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(),
+                         nn.Linear(hidden, outputs))
+
+
+class CompactEncoder(nn.Module):
+    """4 strided conv layers (32-64-128-128 channels) and a linear layer on the 4x4 map: (N,3,H,W) -> (N,D).
+
+    The spatial layout is kept (no global pooling): where a wall corner or an object appears is the signal.
+    """
+
+    def __init__(self, feature_dim: int) -> None:
+        super().__init__()
+        layers: list[nn.Module] = []
+        for cin, cout in ((3, 32), (32, 64), (64, 128), (128, 128)):
+            layers += [nn.Conv2d(cin, cout, 3, stride=2, padding=1), nn.GroupNorm(8, cout), nn.ReLU()]
+        self.features = nn.Sequential(*layers, nn.AdaptiveAvgPool2d(4), nn.Flatten())
+        self.project = nn.Sequential(nn.Linear(128 * 16, feature_dim), nn.ReLU())
+
+    def forward(self, images: torch.Tensor) -> torch.Tensor:
+        return self.project(self.features(images))
+
+
+class ResNet18Encoder(nn.Module):
+    """torchvision's ResNet18, randomly initialized (no weights can be downloaded), -> (N, D)."""
+
+    def __init__(self, feature_dim: int) -> None:
+        super().__init__()
+        from torchvision.models import resnet18  # noqa: PLC0415 - only this encoder needs torchvision
+
+        self.backbone = resnet18(weights=None)
+        self.backbone.fc = nn.Sequential(nn.Linear(512, feature_dim), nn.ReLU())
+
+    def forward(self, images: torch.Tensor) -> torch.Tensor:
+        return self.backbone(images)
+
+
+def _agent_distribution(raw: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    """(..., 8) -> mean (..., 2), tril (..., 2, 2), heading (...), kappa (...)."""
+    return raw[..., :2], scale_tril(raw[..., 2:5]), torch.atan2(raw[..., 6], raw[..., 5]), positive(raw[..., 7], MIN_KAPPA)
+
+
+class PoseNet(nn.Module):
+    """f(o_t, c): image + class ids -> agent global pose and each object's ego position, with uncertainty."""
+
+    def __init__(self, config: LNetConfig) -> None:
+        super().__init__()
+        encoder = CompactEncoder if config.encoder == "compact" else ResNet18Encoder
+        self.encoder = encoder(config.feature_dim)
+        self.embed = nn.Embedding(N_CLASSES + 1, config.class_embedding_dim)
+        self.agent_head = _mlp(config.feature_dim, config.mlp_hidden, 8)
+        self.object_head = _mlp(config.feature_dim + config.class_embedding_dim, config.mlp_hidden, 5)
+
+    def forward(self, images: torch.Tensor, classes: torch.Tensor) -> PoseEstimate:
+        """images (N, 3, H, W), classes (N, K) -> PoseEstimate with leading dim N (objects in the ego frame)."""
+        features = self.encoder(images)
+        mean, tril, heading, kappa = _agent_distribution(self.agent_head(features))
+        embedded = self.embed(torch.where(classes >= 0, classes, torch.full_like(classes, _ABSENT)))
+        per_object = torch.cat([features.unsqueeze(1).expand(-1, K, -1), embedded], -1)
+        raw = self.object_head(per_object)
+        return PoseEstimate(mean, tril, heading, kappa, raw[..., :2], scale_tril(raw[..., 2:5]), "ego")
+
+
+def _summary(estimate: PoseEstimate) -> torch.Tensor:
+    """A flat, well-scaled vector of a PoseNet estimate, (..., 8 + 5K): means, log-scales, heading as cos/sin."""
+    def tril_features(tril: torch.Tensor) -> torch.Tensor:
+        return torch.stack([torch.log(tril[..., 0, 0]), torch.log(tril[..., 1, 1]), tril[..., 1, 0]], -1)
+
+    agent = torch.cat([estimate.agent_mean, tril_features(estimate.agent_tril), torch.cos(estimate.heading)[..., None],
+                       torch.sin(estimate.heading)[..., None], torch.log(estimate.kappa)[..., None]], -1)
+    objects = torch.cat([estimate.object_mean, tril_features(estimate.object_tril)], -1).flatten(-2)
+    return torch.cat([agent, objects], -1)
+
+
+class LNet(nn.Module):
+    """PoseNet per frame, then an LSTM over the episode -> world-frame estimates of the agent and all objects.
+
+    LSTM input per step: the PoseNet summary, the ego object estimates projected to the world with the PoseNet's
+    agent estimate, which slots are present, which object is held (observed), and optionally the previous action.
+    """
+
+    def __init__(self, config: LNetConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.posenet = PoseNet(config)
+        inputs = (8 + 5 * K) + 2 * K + K + (K + 1) + ((N_ACTIONS + 1) if config.use_actions else 0)
+        self.lstm = nn.LSTM(inputs, config.lstm_hidden, batch_first=True)
+        self.head = nn.Linear(config.lstm_hidden, 8 + 5 * K)
+
+    def forward(
+        self, images: torch.Tensor, classes: torch.Tensor, held: torch.Tensor, previous_actions: torch.Tensor,
+        state: tuple[torch.Tensor, torch.Tensor] | None = None,
+    ) -> tuple[PoseEstimate, PoseEstimate, tuple[torch.Tensor, torch.Tensor]]:
+        """images (B, T, 3, H, W); classes (B, K); held (B, T) index or -1; previous_actions (B, T) the action
+        taken before each frame (-1 at an episode's start). Returns (per-frame PoseNet estimates, LSTM estimates,
+        LSTM state), both estimates with leading dims (B, T)."""
+        b, t = images.shape[:2]
+        frame_classes = classes.unsqueeze(1).expand(-1, t, -1).reshape(b * t, K)
+        single = self.posenet(images.flatten(0, 1), frame_classes)
+        single = PoseEstimate(*(getattr(single, n).unflatten(0, (b, t)) for n in
+                                ("agent_mean", "agent_tril", "heading", "kappa", "object_mean", "object_tril")),
+                              frame="ego")
+        projected = ego_to_world(single.object_mean, single.agent_mean, single.heading).flatten(-2)
+        present = (classes >= 0).float().unsqueeze(1).expand(-1, t, -1)
+        held_one_hot = nn.functional.one_hot(torch.where(held >= 0, held, torch.full_like(held, K)), K + 1).float()
+        inputs = [_summary(single), projected, present, held_one_hot]
+        if self.config.use_actions:
+            actions = torch.where(previous_actions >= 0, previous_actions, torch.full_like(previous_actions, _NO_ACTION))
+            inputs.append(nn.functional.one_hot(actions, N_ACTIONS + 1).float())
+        hidden, state = self.lstm(torch.cat(inputs, -1), state)
+        raw = self.head(hidden)
+        mean, tril, heading, kappa = _agent_distribution(raw[..., :8])
+        objects = raw[..., 8:].unflatten(-1, (K, 5))
+        tracked = PoseEstimate(mean, tril, heading, kappa, objects[..., :2], scale_tril(objects[..., 2:5]), "world")
+        return single, tracked, state

@@ -1,0 +1,58 @@
+"""The L-Net's parameters (architecture and training), validated; no torch import, so configs load fast."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class LNetConfig(BaseModel):
+    """Architecture. ``encoder``: ``compact`` (CPU profiles) or ``resnet18`` (the paper's, trained from scratch)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    encoder: Literal["compact", "resnet18"] = "compact"
+    feature_dim: int = Field(256, ge=8)
+    class_embedding_dim: int = Field(32, ge=1)
+    mlp_hidden: int = Field(256, ge=8)
+    lstm_hidden: int = Field(256, ge=8)
+    use_actions: bool = Field(True, description="feed the previous action to the LSTM (our addition)")
+
+
+class TrainParams(BaseModel):
+    """Every hyper-parameter of a training run."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    window: int = Field(32, ge=2, description="frames per training sequence")
+    stride: int = Field(16, ge=1, description="frames between window starts")
+    batch_size: int = Field(16, ge=1)
+    learning_rate: float = Field(1e-3, gt=0)
+    weight_decay: float = Field(1e-4, ge=0)
+    grad_clip: float = Field(1.0, gt=0)
+    max_steps: int = Field(3000, ge=1)
+    eval_every: int = Field(250, ge=1)
+    validation_windows: int = Field(256, ge=1, description="fixed subset of validation windows per evaluation")
+    patience: int = Field(4, ge=1, description="evaluations without improvement before stopping")
+    num_workers: int = Field(1, ge=0)
+    seed: int = 0
+
+
+class CalibrationParams(BaseModel):
+    """Fitting the uncertainty scales on the validation split."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    max_episodes: int = Field(200, ge=1, description="validation episodes used to fit the scales")
+
+
+class LNetParams(BaseModel):
+    """Everything the L-Net stages read from a profile."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    model: LNetConfig = Field(default_factory=LNetConfig)
+    train: TrainParams = Field(default_factory=TrainParams)
+    calibration: CalibrationParams = Field(default_factory=CalibrationParams)
+    eval_episodes: int = Field(200, ge=1, description="test episodes evaluated (all of them if fewer)")

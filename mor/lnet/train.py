@@ -1,0 +1,170 @@
+"""Training the L-Net on a split's windows: early stopping on validation, resumable checkpoints, CSV log.
+
+Read top to bottom: parameters, data, model, the loop (step, evaluate, checkpoint), the summary.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, Subset
+from tqdm import tqdm
+
+from mor.data.sequences import SequenceWindows
+from mor.errors import MorError
+from mor.lnet.loss import lnet_loss, previous_actions
+from mor.lnet.model import LNet
+from mor.lnet.params import LNetConfig, TrainParams
+
+CHECKPOINT = "checkpoint.pt"  # the latest state, to resume
+BEST = "model.pt"             # the best weights on validation
+LOG = "log.csv"
+
+
+class CheckpointMismatch(MorError):
+    """A checkpoint made with other parameters, data or image size than the run that loads it."""
+
+
+def pick_device() -> torch.device:
+    """CUDA when present, else the CPU."""
+    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+
+
+def to_device(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str, torch.Tensor]:
+    return {key: value.to(device, non_blocking=True) for key, value in batch.items()}
+
+
+def run_model(model: LNet, batch: dict[str, torch.Tensor]) -> tuple:
+    """The model on a loader batch -> (PoseNet estimates, LSTM estimates, LSTM state)."""
+    return model(batch["images"], batch["object_classes"], batch["held"], previous_actions(batch["actions"]))
+
+
+def signature(config: LNetConfig, dataset_version: str, image_size: int) -> dict[str, Any]:
+    """What a checkpoint must agree on with the run that loads it."""
+    return {"config": config.model_dump(), "dataset_version": dataset_version, "image_size": image_size}
+
+
+def check_compatible(saved: dict[str, Any], path: Path, expected: dict[str, Any]) -> None:
+    """Raise CheckpointMismatch (one line naming both sides) unless ``saved`` has the ``expected`` signature."""
+    for key, ours in expected.items():
+        theirs = saved.get(key)
+        if theirs != ours:
+            if isinstance(ours, dict) and isinstance(theirs, dict):
+                theirs, ours = ({k: v for k, v in theirs.items() if ours.get(k) != v},
+                                {k: v for k, v in ours.items() if theirs.get(k) != v})
+            raise CheckpointMismatch(f"{path}: checkpoint {key} is {theirs} but this run's is {ours}; retrain "
+                                     "(mor train-lnet) or use the checkpoint that matches the data and profile")
+
+
+def load_model(path: Path, expected: dict[str, Any], device: torch.device) -> LNet:
+    """The weights at ``path`` in a fresh LNet, after checking the checkpoint's signature."""
+    if not path.is_file():
+        raise MorError(f"{path}: no L-Net checkpoint; run mor train-lnet first")
+    saved = torch.load(path, map_location=device, weights_only=False)
+    check_compatible(saved, path, expected)
+    model = LNet(LNetConfig(**saved["config"])).to(device)
+    model.load_state_dict(saved["model"])
+    return model.eval()
+
+
+def _save(path: Path, payload: dict[str, Any]) -> None:
+    partial = path.with_name(path.name + ".partial")
+    torch.save(payload, partial)
+    partial.replace(path)
+
+
+@torch.no_grad()
+def validation_loss(model: LNet, loader: DataLoader, device: torch.device) -> float:
+    model.eval()
+    losses = [float(lnet_loss(*run_model(model, batch)[:2], batch)[0])
+              for batch in (to_device(b, device) for b in loader)]
+    model.train()
+    return float(np.mean(losses))
+
+
+def train(config: LNetConfig, params: TrainParams, train_root: Path, validation_root: Path, out_dir: Path,
+          dataset_version: str, device: torch.device | None = None, progress: bool = True) -> dict[str, Any]:
+    """Train (or resume training) and return a summary; ``out_dir`` gets checkpoint.pt, model.pt and log.csv."""
+    device = device or pick_device()
+    torch.manual_seed(params.seed)
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    # Data: windows of consecutive frames; a fixed subset of validation windows.
+    train_set = SequenceWindows(train_root, params.window, params.stride)
+    validation_set = SequenceWindows(validation_root, params.window, params.window)
+    expected = signature(config, dataset_version, train_set.image_size)
+    chosen = np.random.default_rng(params.seed).permutation(len(validation_set))[: params.validation_windows]
+    validation_loader = DataLoader(Subset(validation_set, sorted(chosen.tolist())), batch_size=params.batch_size,
+                                   num_workers=params.num_workers)
+
+    # Model and optimizer, resumed from the last checkpoint when there is one.
+    model = LNet(config).to(device)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=params.learning_rate, weight_decay=params.weight_decay)
+    step, best, stale = 0, float("inf"), 0
+    checkpoint_path = out_dir / CHECKPOINT
+    if checkpoint_path.is_file():
+        saved = torch.load(checkpoint_path, map_location=device, weights_only=False)
+        check_compatible(saved, checkpoint_path, expected)
+        model.load_state_dict(saved["model"])
+        optimizer.load_state_dict(saved["optimizer"])
+        step, best, stale = saved["step"], saved["best"], saved["stale"]
+    elif (out_dir / LOG).exists():
+        (out_dir / LOG).unlink()
+
+    def batches(epoch: int):
+        generator = torch.Generator().manual_seed(params.seed * 100_003 + epoch)
+        return DataLoader(train_set, batch_size=params.batch_size, shuffle=True, drop_last=True,
+                          generator=generator, num_workers=params.num_workers, persistent_workers=False)
+
+    steps_per_epoch = max(1, len(train_set) // params.batch_size)
+    log_file = open(out_dir / LOG, "a", newline="")  # noqa: SIM115 - closed below
+    log = csv.DictWriter(log_file, fieldnames=["step", "split", "loss", "seconds"], extrasaction="ignore")
+    if log_file.tell() == 0:
+        log.writeheader()
+    start = time.perf_counter()
+    bar = tqdm(total=params.max_steps, initial=step, desc="train L-Net", unit="step", disable=not progress)
+    model.train()
+    stopped_early = False
+    while step < params.max_steps and not stopped_early:
+        epoch, skip = divmod(step, steps_per_epoch)
+        for index, batch in enumerate(batches(epoch)):
+            if index < skip:
+                continue  # resuming mid-epoch: the same shuffled order, minus what was done
+            batch = to_device(batch, device)
+            loss, _ = lnet_loss(*run_model(model, batch)[:2], batch)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), params.grad_clip)
+            optimizer.step()
+            step += 1
+            bar.update(1)
+            bar.set_postfix(loss=f"{loss.item():.3f}", refresh=False)
+            log.writerow({"step": step, "split": "train", "loss": loss.item(),
+                          "seconds": time.perf_counter() - start})
+            if step % params.eval_every == 0 or step == params.max_steps:
+                value = validation_loss(model, validation_loader, device)
+                log.writerow({"step": step, "split": "validation", "loss": value,
+                              "seconds": time.perf_counter() - start})
+                log_file.flush()
+                improved = value < best
+                best, stale = (value, 0) if improved else (best, stale + 1)
+                state = {**expected, "params": params.model_dump(), "step": step}
+                if improved:
+                    _save(out_dir / BEST, {**state, "model": model.state_dict(), "validation_loss": value})
+                _save(checkpoint_path, {**state, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                                        "best": best, "stale": stale})
+                stopped_early = stale >= params.patience
+            if step >= params.max_steps or stopped_early:
+                break
+    bar.close()
+    log_file.close()
+    summary = {"steps": step, "best_validation_loss": best, "stopped_early": stopped_early,
+               "train_windows": len(train_set), "device": str(device), "dataset_version": dataset_version}
+    (out_dir / "train_summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary

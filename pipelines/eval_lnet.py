@@ -1,0 +1,65 @@
+"""Stage ``eval_lnet``: test-split metrics before and after calibration, figures, the model card."""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import asdict
+from typing import Any
+
+import numpy as np
+
+from mor.config import Profile
+from mor.data.manifest import manifest_version, read_manifest
+from mor.data.sequences import SequenceWindows
+from mor.lnet.card import read_json, render_model_card, write_model_card
+from mor.lnet.evaluate import metrics, predict
+from mor.lnet.figures import write_estimate_gif, write_estimate_strip, write_reliability_diagram
+from mor.sim.arena import Arena
+from pipelines import paths
+from pipelines.io import write_json
+from pipelines.lnet_io import load_calibration, load_trained
+
+FIGURE_EPISODE = 0
+
+
+def run(profile: Profile) -> dict[str, Any]:
+    card = paths.LNET_CARD
+    card.mkdir(parents=True, exist_ok=True)
+    model, device = load_trained(profile, paths.LNET / "model.pt")
+    calibration = load_calibration(paths.LNET_CALIBRATION)
+    predictions = predict(model, paths.LEROBOT / "test", profile.lnet.eval_episodes, device)
+    result = {
+        "dataset_version": manifest_version(read_manifest(paths.MANIFEST)),
+        "calibration": asdict(calibration),
+        "before_calibration": metrics(predictions),
+        "after_calibration": metrics(calibration.apply(predictions)),
+    }
+    write_json(card / "metrics.json", result)
+
+    reliability = {f"{name} ({when})": result[key]["reliability"][name]
+                   for key, when in (("before_calibration", "before"), ("after_calibration", "after"))
+                   for name in ("agent_position", "objects_seen", "heading")}
+    write_reliability_diagram(card / "reliability.png", np.asarray(result["before_calibration"]["reliability"]
+                              ["nominal"]), {k: np.asarray(v) for k, v in reliability.items()},
+                              "L-Net reliability on the test split")
+    episode = SequenceWindows(paths.LEROBOT / "test", window=None)[FIGURE_EPISODE]
+    rows = predictions.episode == FIGURE_EPISODE
+    shown = calibration.apply(predictions).select(rows)
+    truth = {"agent_poses": episode["agent_pose"].numpy(), "object_positions": episode["object_positions"].numpy(),
+             "object_classes": episode["object_classes"].numpy()}
+    estimate = {name: getattr(shown, name) for name in ("agent_mean", "agent_tril", "heading", "kappa",
+                                                        "object_mean", "object_tril")}
+    images = (episode["images"].permute(0, 2, 3, 1).numpy() * 255).round().astype(np.uint8)
+    arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
+    frames = np.linspace(0, len(images) - 1, 6).round().astype(int).tolist()
+    write_estimate_strip(card / "estimates_strip.png", arena, truth, estimate, frames, images)
+    write_estimate_gif(card / "estimates.gif", arena, truth, estimate, images, fps=5, every=2)
+    shutil.copyfile(paths.LNET / "learning_curve.png", card / "learning_curve.png")
+    shutil.copyfile(paths.LNET / "model.pt", card / "model.pt")
+    shutil.copyfile(paths.LNET_CALIBRATION, card / "calibration.json")
+    text = render_model_card(result, profile.lnet.model_dump(mode="json") | {"sim": profile.sim.model_dump()},
+                             read_json(paths.LNET_CALIBRATION), read_json(paths.LNET / "train_summary.json"),
+                             {"reliability": "reliability.png", "strip": "estimates_strip.png",
+                              "gif": "estimates.gif", "learning_curve": "learning_curve.png"})
+    write_model_card(card / "README.md", text)
+    return result

@@ -1,0 +1,90 @@
+"""Model shapes, frame conventions, the masked loss, training resumption, checkpoint checks, calibration."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from mor.lnet.evaluate import NOMINAL_2D, Calibration, Predictions, fit_calibration, metrics
+from mor.lnet.frames import ego_to_world, world_to_ego
+from mor.lnet.loss import lnet_loss, previous_actions
+from mor.lnet.model import LNet
+from mor.lnet.params import LNetConfig
+from mor.sim import geometry
+
+SMALL = LNetConfig(feature_dim=32, mlp_hidden=32, lstm_hidden=32)
+
+
+def _batch(b: int = 2, t: int = 4, size: int = 16) -> dict[str, torch.Tensor]:
+    generator = torch.Generator().manual_seed(0)
+    return {
+        "images": torch.rand(b, t, 3, size, size, generator=generator),
+        "object_classes": torch.tensor([[3, 10, 20, -1, -1]] * b),
+        "held": torch.full((b, t), -1),
+        "actions": torch.zeros((b, t), dtype=torch.long),
+        "agent_pose": torch.rand(b, t, 3, generator=generator),
+        "object_positions": torch.rand(b, t, 5, 2, generator=generator),
+        "object_mask": torch.tensor([[True, True, True, False, False]] * b),
+    }
+
+
+def test_torch_frames_agree_with_the_simulator_geometry() -> None:
+    rng = np.random.default_rng(0)
+    pose = np.array([1.2, -0.7, 2.5])
+    points = rng.normal(size=(5, 2))
+    ego = world_to_ego(torch.tensor(points), torch.tensor(pose[:2]), torch.tensor(pose[2]))
+    np.testing.assert_allclose(ego.numpy(), geometry.world_to_ego(points, pose), atol=1e-12)
+    back = ego_to_world(ego, torch.tensor(pose[:2]), torch.tensor(pose[2]))
+    np.testing.assert_allclose(back.numpy(), points, atol=1e-12)
+
+
+@pytest.mark.parametrize("encoder", ["compact", "resnet18"])
+def test_lnet_shapes(encoder: str) -> None:
+    model = LNet(SMALL.model_copy(update={"encoder": encoder}))
+    batch = _batch()
+    single, tracked, state = model(batch["images"], batch["object_classes"], batch["held"],
+                                   previous_actions(batch["actions"]))
+    assert single.frame == "ego" and tracked.frame == "world"
+    assert tracked.agent_mean.shape == (2, 4, 2) and tracked.agent_tril.shape == (2, 4, 2, 2)
+    assert tracked.object_mean.shape == (2, 4, 5, 2) and tracked.kappa.shape == (2, 4)
+    assert torch.all(tracked.kappa > 0) and state[0].shape == (1, 2, 32)
+
+
+def test_absent_objects_do_not_change_the_loss() -> None:
+    model = LNet(SMALL)
+    batch = _batch()
+    out = model(batch["images"], batch["object_classes"], batch["held"], previous_actions(batch["actions"]))
+    loss, _ = lnet_loss(*out[:2], batch)
+    batch["object_positions"][:, :, 3:] += 100.0
+    again, _ = lnet_loss(*out[:2], batch)
+    assert float(loss) == pytest.approx(float(again))
+
+
+def _predictions(n: int, true_scale: float, stated_scale: float) -> Predictions:
+    rng = np.random.default_rng(0)
+    agent = rng.normal(size=(n, 3))
+    objects = rng.normal(size=(n, 5, 2))
+    tril = np.broadcast_to(np.eye(2) * stated_scale, (n, 2, 2)).copy()
+    return Predictions(
+        agent_pose=agent, agent_mean=agent[:, :2] + rng.normal(scale=true_scale, size=(n, 2)), agent_tril=tril,
+        heading=agent[:, 2] + rng.vonmises(0.0, 100.0, size=n), kappa=np.full(n, 400.0),
+        object_truth=objects, object_mean=objects + rng.normal(scale=true_scale, size=(n, 5, 2)),
+        object_tril=np.broadcast_to(np.eye(2) * stated_scale, (n, 5, 2, 2)).copy(),
+        present=np.tile([True, True, True, False, False], (n, 1)), seen=np.ones((n, 5), bool),
+        episode=np.zeros(n, int), frame=np.arange(n))
+
+
+def test_calibration_repairs_overconfidence() -> None:
+    predictions = _predictions(4000, true_scale=0.2, stated_scale=0.1)  # stated sigma half the true one
+    before = metrics(predictions)["coverage"]["agent_position"]["2sigma"]
+    calibration = fit_calibration(predictions)
+    assert calibration.agent_scale == pytest.approx(2.0, rel=0.05)
+    assert calibration.object_scale == pytest.approx(2.0, rel=0.05)
+    assert calibration.kappa_scale == pytest.approx(0.25, rel=0.1)  # kappa 400 stated, 100 true
+    after = metrics(calibration.apply(predictions))["coverage"]
+    assert before < 0.5
+    for k in (1, 2, 3):
+        assert after["agent_position"][f"{k}sigma"] == pytest.approx(NOMINAL_2D[k], abs=0.03)
+        assert after["objects_seen"][f"{k}sigma"] == pytest.approx(NOMINAL_2D[k], abs=0.03)
+    assert Calibration().apply(predictions).agent_tril is not None

@@ -1,0 +1,62 @@
+"""Training on the tiny dataset: it runs, resumes after an interruption, and refuses foreign checkpoints."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pytest
+import torch
+
+from mor.data.manifest import manifest_version, read_manifest
+from mor.lnet.evaluate import fit_calibration, metrics, predict
+from mor.lnet.params import LNetConfig, TrainParams
+from mor.lnet.train import BEST, CHECKPOINT, LOG, CheckpointMismatch, load_model, signature, train
+
+CONFIG = LNetConfig(feature_dim=32, mlp_hidden=32, lstm_hidden=32)
+PARAMS = TrainParams(window=8, stride=8, batch_size=4, max_steps=4, eval_every=2, validation_windows=4,
+                     num_workers=0)
+
+
+def _steps(log: Path) -> list[int]:
+    with open(log) as stream:
+        return [int(row["step"]) for row in csv.DictReader(stream) if row["split"] == "train"]
+
+
+def test_training_resumes_where_it_stopped(tiny_dataset: tuple, tmp_path: Path) -> None:
+    manifest, root, _ = tiny_dataset
+    version = manifest_version(read_manifest(manifest))
+    first = train(CONFIG, PARAMS, root / "train", root / "validation", tmp_path, version, progress=False)
+    assert first["steps"] == 4 and (tmp_path / CHECKPOINT).is_file() and (tmp_path / BEST).is_file()
+    more = PARAMS.model_copy(update={"max_steps": 6})
+    second = train(CONFIG, more, root / "train", root / "validation", tmp_path, version, progress=False)
+    assert second["steps"] == 6
+    assert _steps(tmp_path / LOG) == [1, 2, 3, 4, 5, 6]  # nothing redone, nothing skipped
+
+
+def test_foreign_checkpoints_are_refused_with_both_sides_named(tiny_dataset: tuple, tmp_path: Path) -> None:
+    manifest, root, _ = tiny_dataset
+    version = manifest_version(read_manifest(manifest))
+    train(CONFIG, PARAMS.model_copy(update={"max_steps": 2}), root / "train", root / "validation", tmp_path, version,
+          progress=False)
+    with pytest.raises(CheckpointMismatch, match="dataset_version is .* but this run's is 'other'") as error:
+        load_model(tmp_path / BEST, signature(CONFIG, "other", 16), torch.device("cpu"))
+    assert "\n" not in str(error.value)
+    with pytest.raises(CheckpointMismatch, match="image_size is 16 but this run's is 64"):
+        load_model(tmp_path / BEST, signature(CONFIG, version, 64), torch.device("cpu"))
+    with pytest.raises(CheckpointMismatch, match="lstm_hidden"):
+        load_model(tmp_path / BEST, signature(CONFIG.model_copy(update={"lstm_hidden": 8}), version, 16),
+                   torch.device("cpu"))
+
+
+def test_predict_calibrate_and_score_whole_episodes(tiny_dataset: tuple, tmp_path: Path) -> None:
+    manifest, root, rows = tiny_dataset
+    version = manifest_version(read_manifest(manifest))
+    train(CONFIG, PARAMS.model_copy(update={"max_steps": 2}), root / "train", root / "validation", tmp_path, version,
+          progress=False)
+    model = load_model(tmp_path / BEST, signature(CONFIG, version, 16), torch.device("cpu"))
+    predictions = predict(model, root / "test", 10, torch.device("cpu"), progress=False)
+    assert len(predictions.frame) == sum(r["n_frames"] for r in rows if r["split"] == "test")
+    result = metrics(fit_calibration(predictions).apply(predictions))
+    assert 0.0 <= result["coverage"]["agent_position"]["2sigma"] <= 1.0
+    assert result["agent_position_error_m"]["median"] >= 0.0

@@ -1,0 +1,102 @@
+"""The stage contracts of the ``mor`` command line, run on the ``tiny`` profile from the repository root."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+from PIL import Image
+from typer.testing import CliRunner
+
+from mor.cli import app
+
+TASKS = ("pick", "drop", "rearrange")
+
+
+@pytest.fixture
+def cli(repo_root: Path, monkeypatch: pytest.MonkeyPatch):
+    """``cli(*args)``: run ``mor *args`` from the repository root; fail with the output if it exits non-zero."""
+    monkeypatch.chdir(repo_root)
+    runner = CliRunner()
+
+    def invoke(*args: str):
+        result = runner.invoke(app, list(args))
+        assert result.exit_code == 0, f"exit {result.exit_code}: {result.output}\n{result.exception!r}"
+        return result
+
+    return invoke
+
+
+def test_oracle_writes_metrics_json(cli, tmp_path: Path) -> None:
+    out = tmp_path / "tmp" / "metrics.json"
+    result = cli("sim", "oracle", "--profile", "tiny", "--episodes", "1", "--seeds", "0", "--out", str(out))
+    payload = json.loads(out.read_text())
+    assert set(payload["tasks"]) == set(TASKS)
+    for task in TASKS:
+        entry = payload["tasks"][task]
+        assert entry["policy"] == "oracle" and entry["episodes_per_seed"] == 1 and entry["seeds"] == [0]
+        assert entry["env_kwargs"]["image_size"] == 32 and entry["env_kwargs"]["n_objects"] == 3
+        summary = entry["summary"]
+        assert {"success", "steps"} <= set(summary)
+        for name, stats in summary.items():
+            assert set(stats) == {"mean", "std"}, name
+            assert stats["std"] == 0.0  # one seed
+        assert 0.0 <= summary["success"]["mean"] <= 1.0
+    assert {"fixed_strict", "energy_remaining"} <= set(payload["tasks"]["rearrange"]["summary"])
+    assert f"wrote {out}" in result.stdout
+    assert not list(out.parent.glob("*.partial"))
+
+
+def test_oracle_single_task(cli, tmp_path: Path) -> None:
+    out = tmp_path / "m.json"
+    cli("sim", "oracle", "--profile", "tiny", "--task", "drop", "--episodes", "1", "--seeds", "3", "--out", str(out))
+    payload = json.loads(out.read_text())
+    assert list(payload["tasks"]) == ["drop"]
+    assert payload["tasks"]["drop"]["seeds"] == [3]
+
+
+def test_render_writes_two_pngs(cli, tmp_path: Path) -> None:
+    result = cli("sim", "render", "--profile", "tiny", "--task", "drop", "--seed", "2", "--out-dir", str(tmp_path))
+    pngs = sorted(tmp_path.glob("*.png"))
+    assert [p.name for p in pngs] == ["drop_seed2_first_person.png", "drop_seed2_top_down.png"]
+    first_person, top_down = (Image.open(p) for p in pngs)
+    assert first_person.size == (32, 32) and first_person.mode == "RGB"
+    assert top_down.size == (256, 256) and top_down.mode == "RGB"
+    assert np.asarray(first_person).std() > 0
+    assert result.stdout.count("wrote ") == 2
+
+
+def test_video_writes_a_gif(cli, tmp_path: Path) -> None:
+    out = tmp_path / "tmp" / "x.gif"
+    result = cli("sim", "video", "--profile", "tiny", "--out", str(out))
+    frames = iio.imread(out, index=None)
+    assert frames.ndim == 4 and frames.shape[0] >= 2
+    assert frames.shape[1:3] == (256, 516)  # first-person scaled to 256 beside the 256 top-down view
+    assert "steps" in result.stdout and str(out) in result.stdout
+
+
+def test_video_random_policy_other_task(cli, tmp_path: Path) -> None:
+    out = tmp_path / "r.gif"
+    cli("sim", "video", "--profile", "tiny", "--task", "drop", "--policy", "random", "--seed", "1", "--out", str(out))
+    assert iio.imread(out, index=None).shape[0] >= 2
+
+
+def test_demo_writes_pngs_and_mp4(cli, tmp_path: Path) -> None:
+    result = cli("sim", "demo", "--profile", "tiny", "--out-dir", str(tmp_path))
+    names = sorted(p.name for p in tmp_path.iterdir())
+    # tiny profile: demo task pick, seed 0, oracle policy
+    assert names == ["pick_seed0_first_person.png", "pick_seed0_oracle.mp4", "pick_seed0_top_down.png"]
+    mp4 = tmp_path / "pick_seed0_oracle.mp4"
+    assert mp4.read_bytes()[4:8] == b"ftyp"
+    frames = iio.imread(mp4, index=None, plugin="pyav")
+    assert frames.shape[0] >= 2 and frames.shape[1:] == (256, 516, 3)
+    assert result.stdout.count("wrote ") == 3
+
+
+def test_help_lists_the_commands(cli) -> None:
+    result = cli("sim", "--help")
+    for command in ("oracle", "render", "video", "demo"):
+        assert command in result.stdout

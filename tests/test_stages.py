@@ -1,0 +1,71 @@
+"""Stage contracts on the tiny profile: the CLI stages in order, each reading the previous one's outputs."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from mor.cli import app
+
+
+@pytest.fixture
+def workspace(tmp_path: Path, repo_root: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """An empty project folder with the repository's params.yaml, as the current directory."""
+    shutil.copy(repo_root / "params.yaml", tmp_path / "params.yaml")
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def _run(*args: str) -> str:
+    result = CliRunner().invoke(app, list(args))
+    assert result.exit_code == 0, result.output
+    return result.output
+
+
+def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
+    tiny = yaml.safe_load((workspace / "params.yaml").read_text())["profiles"]["tiny"]
+    episodes = tiny["collect"]["episodes"]
+
+    _run("collect", "--profile", "tiny")
+    files = sorted((workspace / "datasets/episodes").glob("*.mcap"))
+    assert len(files) == episodes
+    stats = json.loads((workspace / "datasets/collect_stats.json").read_text())
+    assert stats["frames"] == episodes * (tiny["collect"]["episode_steps"] + 1)
+
+    _run("build-dataset", "--profile", "tiny")
+    manifest = pq.read_table(workspace / "datasets/manifest.parquet")
+    assert manifest.num_rows == episodes and manifest.schema.metadata[b"dataset_version"]
+    for split in ("train", "validation", "test"):
+        info = json.loads((workspace / f"datasets/lerobot/{split}/meta/info.json").read_text())
+        assert info["total_episodes"] == sum(1 for s in manifest["split"].to_pylist() if s == split)
+    assert (workspace / "cards/dataset/README.md").is_file()
+
+    _run("validate")
+    assert json.loads((workspace / "datasets/validation/report.json").read_text())["ok"]
+
+    # A second collect changes nothing: everything is already there.
+    assert "collected 0 episodes" in _run("collect", "--profile", "tiny")
+
+    _run("train-lnet", "--profile", "tiny")
+    assert (workspace / "datasets/lnet/model.pt").is_file()
+    assert (workspace / "datasets/lnet/learning_curve.png").is_file()
+    _run("calibrate-lnet", "--profile", "tiny")
+    assert json.loads((workspace / "datasets/lnet/calibration.json").read_text())["agent_scale"] > 0
+    _run("eval-lnet", "--profile", "tiny")
+    card = workspace / "cards/lnet"
+    metrics = json.loads((card / "metrics.json").read_text())
+    assert set(metrics) >= {"before_calibration", "after_calibration", "dataset_version"}
+    for name in ("README.md", "model.pt", "reliability.png", "estimates_strip.png", "estimates.gif"):
+        assert (card / name).is_file(), name
+
+
+def test_validate_without_a_manifest_is_one_clear_line(workspace: Path) -> None:
+    result = CliRunner().invoke(app, ["validate"])
+    assert result.exit_code == 2
+    assert result.output.strip().splitlines() == ["error: datasets/manifest.parquet: no manifest; run mor build-dataset first"]
