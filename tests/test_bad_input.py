@@ -264,3 +264,10 @@ def test_cli_unknown_task(runner: CliRunner, repo_root: Path, monkeypatch: pytes
     assert result.exit_code == 2
     lines = _error_lines(result)
     assert len(lines) == 1 and lines[0].startswith("error: ") and "--task" in lines[0] and "fly" in lines[0]
+
+
+@pytest.mark.parametrize("horizon", [0, -3])
+def test_a_horizon_below_one_step_is_refused(horizon: int) -> None:
+    with pytest.raises(ConfigError, match="horizon: must be at least 1 step") as error:
+        gym.make("MOR/Pick-v0", horizon=horizon, image_size=16)
+    assert "\n" not in str(error.value)

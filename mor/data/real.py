@@ -44,7 +44,6 @@ messages' header stamps where they have one (``timestamps="header"``).
 
 from __future__ import annotations
 
-import hashlib
 import io
 import logging
 import string
@@ -60,6 +59,7 @@ from PIL import Image, UnidentifiedImageError
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
 
 from mor.data.episode_io import EpisodeHeader, EpisodeWriter, encode_png
+from mor.data.manifest import file_sha256
 from mor.data.schema import MAX_OBJECTS, NO_ACTION
 from mor.errors import ConfigError, MorError
 from mor.sim.catalog import N_CLASSES
@@ -600,11 +600,6 @@ def _images(bag: _Bag, topic: str, kind: str, ordinals: set[int], size: int) -> 
     return pngs
 
 
-def _sha256(path: Path) -> str:
-    with open(path, "rb") as stream:
-        return hashlib.file_digest(stream, "sha256").hexdigest()
-
-
 def episode_path(out_dir: Path, bag: Path, params: ImportParams) -> Path:
     """Where ``import_rosbag`` writes the episode of ``bag``: ``<out_dir>/<episode id>.mcap``."""
     return Path(out_dir) / f"{params.episode_id or 'real-' + Path(bag).stem}{EPISODE_SUFFIX}"
@@ -629,7 +624,7 @@ def import_rosbag(bag: Path, out_dir: Path, topics: RealTopics, params: ImportPa
         target_positions=np.asarray(params.target_positions, np.float64).reshape(-1, 2),
         wall_textures=(),
         params={"topics": topics.model_dump(mode="json"), "import": params.model_dump(mode="json"),
-                "bag": {"file": source.name, "sha256": _sha256(source)},
+                "bag": {"file": source.name, "sha256": file_sha256(source)},
                 "sources": recording.sources, "quality": frames["quality"]},
     )
     actions = frames["actions"]

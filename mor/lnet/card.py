@@ -50,7 +50,8 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
         "Estimates the robot's global position (bivariate Gaussian), heading (von Mises) and every object's position "
         "(bivariate Gaussians) from first-person RGB frames, the object class ids, the held-object index and "
         f"{'the previous action' if params['model']['use_actions'] else 'no action input'} "
-        "(paper section 4.1; trained with the NLL of Eq. 5).", "",
+        "(paper section 4.1; trained with the NLL of Eq. 5 plus the squared errors of the means, see "
+        "docs/assumptions.md).", "",
         f"- Dataset version: `{metrics['dataset_version']}`; test split: {before['episodes']} episodes, "
         f"{before['frames']} frames.",
         f"- Training: {train_summary['steps']} steps on {train_summary['device']}, best validation loss "

@@ -27,12 +27,11 @@ class SimConfig(BaseModel):
 def format_validation_error(error: ValidationError, where: str) -> str:
     """One line naming the first offending field of ``error`` under ``where`` and what is wrong with it."""
     first = error.errors()[0]
-    field = ".".join(str(part) for part in first["loc"])
-    prefix = f"{where}: " if where else ""
+    place = ": ".join(part for part in (where, ".".join(str(p) for p in first["loc"])) if part)
+    prefix = f"{place}: " if place else ""
     if first["type"] == "extra_forbidden":
-        return f"{prefix}{field}: unknown key; remove it or fix its spelling"
-    got = first.get("input")
-    return f"{prefix}{field}: {first['msg']} (got {got!r})"
+        return f"{prefix}unknown key; remove it or fix its spelling"
+    return f"{prefix}{first['msg']} (got {first.get('input')!r})"
 
 
 def make_sim_config(where: str = "", **values: object) -> SimConfig:

@@ -413,3 +413,21 @@ def test_invalid_parameters_are_one_line_config_errors() -> None:
             make("real", **values)
         assert "\n" not in str(caught.value) and needle in str(caught.value), str(caught.value)
         assert str(caught.value).startswith("real: ")
+
+
+def test_cli_imports_a_bag_and_names_a_missing_topic(string_bag: Path, tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from mor.cli import app
+
+    out = tmp_path / "real"
+    args = ["import-real", str(string_bag), "--object-classes", "0,7,13", "--targets", "1,1;-1,2;0,-1.5",
+            "--episode-id", "real-cli", "--out-dir", str(out)]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    episode = read_episode(out / "real-cli.mcap", with_images=False)
+    assert episode.header.source == "real" and list(episode.header.object_classes) == [0, 7, 13]
+    bad = CliRunner().invoke(app, [*args, "--agent-pose-topic", "/nope"])
+    assert bad.exit_code == 2
+    lines = bad.output.strip().splitlines()
+    assert len(lines) == 1 and "/nope" in lines[0] and "--agent-pose-topic" in lines[0]
