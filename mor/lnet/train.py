@@ -165,6 +165,7 @@ def train(config: LNetConfig, params: TrainParams, train_root: Path, validation_
     bar.close()
     log_file.close()
     summary = {"steps": step, "best_validation_loss": best, "stopped_early": stopped_early,
-               "train_windows": len(train_set), "device": str(device), "dataset_version": dataset_version}
+               "train_windows": len(train_set), "device": str(device), "dataset_version": dataset_version,
+               "image_size": train_set.image_size}
     (out_dir / "train_summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary

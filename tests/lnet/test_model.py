@@ -58,7 +58,7 @@ def test_absent_objects_do_not_change_the_loss() -> None:
     loss, _ = lnet_loss(*out[:2], batch)
     batch["object_positions"][:, :, 3:] += 100.0
     again, _ = lnet_loss(*out[:2], batch)
-    assert float(loss) == pytest.approx(float(again))
+    assert loss.item() == pytest.approx(again.item())
 
 
 def _predictions(n: int, true_scale: float, stated_scale: float) -> Predictions:
@@ -88,3 +88,14 @@ def test_calibration_repairs_overconfidence() -> None:
         assert after["agent_position"][f"{k}sigma"] == pytest.approx(NOMINAL_2D[k], abs=0.03)
         assert after["objects_seen"][f"{k}sigma"] == pytest.approx(NOMINAL_2D[k], abs=0.03)
     assert Calibration().apply(predictions).agent_tril is not None
+
+
+def test_heading_central_mass_agrees_with_the_interval_it_names() -> None:
+    from mor.lnet.evaluate import heading_central_mass
+    from mor.lnet.likelihoods import heading_halfwidth
+
+    for kappa in (0.5, 5.0, 300.0):
+        for mass in (0.3, 0.683, 0.954):
+            edge = heading_halfwidth(kappa, mass)
+            assert heading_central_mass(np.array([edge]), np.array([kappa]))[0] == pytest.approx(mass, abs=1e-6)
+    assert heading_central_mass(np.array([np.pi / 2]), np.array([0.0]))[0] == pytest.approx(0.5)
