@@ -39,7 +39,7 @@ def test_foreign_checkpoints_are_refused_with_both_sides_named(tiny_dataset: tup
     version = manifest_version(read_manifest(manifest))
     train(CONFIG, PARAMS.model_copy(update={"max_steps": 2}), root / "train", root / "validation", tmp_path, version,
           progress=False)
-    with pytest.raises(CheckpointMismatch, match="dataset_version is .* but this run's is 'other'") as error:
+    with pytest.raises(CheckpointMismatch, match="dataset_version is .* but this run's is other;") as error:
         load_model(tmp_path / BEST, signature(CONFIG, "other", 16), torch.device("cpu"))
     assert "\n" not in str(error.value)
     with pytest.raises(CheckpointMismatch, match="image_size is 16 but this run's is 64"):
