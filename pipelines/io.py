@@ -6,11 +6,11 @@ import json
 from pathlib import Path
 from typing import Any
 
+from mor.atomic import atomic_output
+
 
 def write_json(path: Path, payload: dict[str, Any]) -> Path:
     """Write ``payload`` to ``path`` through a temporary name, then rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(path.name + ".partial")
-    partial.write_text(json.dumps(payload, indent=2) + "\n")
-    partial.replace(path)
+    with atomic_output(path) as partial:
+        partial.write_text(json.dumps(payload, indent=2) + "\n")
     return path

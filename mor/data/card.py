@@ -33,9 +33,9 @@ import yaml
 from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
-from PIL import Image
 from tqdm import tqdm
 
+from mor.atomic import atomic_output
 from mor.data.episode_io import EpisodeData, read_episode
 from mor.data.manifest import SPLITS, manifest_version
 from mor.data.schema import MAX_OBJECTS, lerobot_features
@@ -43,6 +43,7 @@ from mor.errors import MorError
 from mor.sim.arena import Arena
 from mor.sim.catalog import ALL_WALL_TEXTURES, COLOUR_NAMES, N_CLASSES, SHAPES, TEXTURE_INDEX, WALL_POOLS, object_class
 from mor.sim.rules import AGENT_RADIUS, Action
+from mor.sim.views import write_png
 
 #: Side of a coverage-grid cell, metres.
 COVERAGE_CELL: float = 0.25
@@ -262,12 +263,9 @@ def summarize_files(paths: Sequence[Path], workers: int = 1, progress: bool = Tr
 
 
 def _save(figure: Figure, path: Path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(path.name + ".partial")
-    figure.savefig(partial, format="png", dpi=_DPI, bbox_inches="tight")
-    partial.replace(path)
-    return path
+    with atomic_output(path) as partial:
+        figure.savefig(partial, format="png", dpi=_DPI, bbox_inches="tight")
+    return Path(path)
 
 
 def _draw_walls(axes: Any, arena: Arena, label: bool = True) -> None:
@@ -410,12 +408,7 @@ def frame_grid(rows: Sequence[Sequence[np.ndarray]], tile: int = FRAME_TILE, gap
 
 def write_frames_png(rows: Sequence[Sequence[np.ndarray]], path: Path, tile: int = FRAME_TILE) -> Path:
     """``frame_grid(rows)`` as a PNG (through a temporary name)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(path.name + ".partial")
-    Image.fromarray(frame_grid(rows, tile)).save(partial, format="PNG")
-    partial.replace(path)
-    return path
+    return write_png(Path(path), frame_grid(rows, tile))
 
 
 def example_frames(paths: Sequence[Path], episodes: int = 4, frames: int = 4,
@@ -782,9 +775,8 @@ def render_card(stats: CardStats, params: dict[str, Any], datasets_root_rel: str
 
 
 def _write_text(path: Path, text: str) -> Path:
-    partial = path.with_name(path.name + ".partial")
-    partial.write_text(text, encoding="utf-8")
-    partial.replace(path)
+    with atomic_output(path) as partial:
+        partial.write_text(text, encoding="utf-8")
     return path
 
 

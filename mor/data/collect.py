@@ -21,7 +21,6 @@ from mor.data.episode_io import EpisodeHeader, EpisodeWriter, encode_png
 from mor.data.exploration import ExplorationParams, ExplorationPolicy
 from mor.sim.config import SimConfig
 from mor.sim.rollout import episode_seed
-from mor.sim.rules import Action
 
 EPISODE_SUFFIX = ".mcap"
 ENV_ID = "MOR/Rearrange-v0"
@@ -170,5 +169,3 @@ def collect(spec: CollectionSpec, out_dir: Path, episodes: int, workers: int, ba
     return {"collected": len(indices), "skipped": episodes - len(indices), "frames": frames,
             "seconds": elapsed, "frames_per_s": frames / elapsed if frames else 0.0}
 
-
-__all__ = ["Action", "CollectionSpec", "collect", "episode_id", "episode_path", "pending_indices"]

@@ -12,6 +12,7 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from mor.atomic import atomic_output
 from mor.data.episode_io import read_metadata
 from mor.errors import MorError
 
@@ -70,10 +71,8 @@ def manifest_version(table: pa.Table) -> str:
 
 def write_manifest(table: pa.Table, path: Path) -> Path:
     """Write through a temporary name, then rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(path.name + ".partial")
-    pq.write_table(table, partial)
-    partial.replace(path)
+    with atomic_output(path) as partial:
+        pq.write_table(table, partial)
     return path
 
 

@@ -8,6 +8,8 @@ from typing import Any
 
 import yaml
 
+from mor.atomic import atomic_output
+
 
 
 def _row(name: str, before: dict, after: dict, path: tuple[str, ...]) -> str:
@@ -86,9 +88,8 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
 
 
 def write_model_card(path: Path, text: str) -> Path:
-    partial = path.with_name(path.name + ".partial")
-    partial.write_text(text)
-    partial.replace(path)
+    with atomic_output(path) as partial:
+        partial.write_text(text)
     return path
 
 

@@ -17,6 +17,7 @@ from torch.utils.data import DataLoader, Subset
 from tqdm import tqdm
 
 from mor.data.sequences import SequenceWindows
+from mor.atomic import atomic_output
 from mor.errors import MorError
 from mor.lnet.loss import lnet_loss, previous_actions
 from mor.lnet.model import LNet
@@ -74,9 +75,8 @@ def load_model(path: Path, expected: dict[str, Any], device: torch.device) -> LN
 
 
 def _save(path: Path, payload: dict[str, Any]) -> None:
-    partial = path.with_name(path.name + ".partial")
-    torch.save(payload, partial)
-    partial.replace(path)
+    with atomic_output(path) as partial:
+        torch.save(payload, partial)
 
 
 @torch.no_grad()

@@ -9,6 +9,7 @@ import imageio.v3 as iio
 import numpy as np
 from PIL import Image, ImageDraw
 
+from mor.atomic import atomic_output
 from mor.sim.arena import Arena
 from mor.sim.catalog import ALL_WALL_TEXTURES, OBJECT_RADIUS, object_class
 from mor.sim.episode import EpisodeLayout
@@ -105,10 +106,8 @@ def side_by_side(first_person: np.ndarray, top_down: np.ndarray) -> np.ndarray:
 
 def write_png(path: Path, image: np.ndarray) -> Path:
     """Write ``image`` as PNG through a temporary name, so a partial file never has the final name."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(path.name + ".partial")
-    Image.fromarray(image).save(partial, format="PNG")
-    partial.replace(path)
+    with atomic_output(path) as partial:
+        Image.fromarray(image).save(partial, format="PNG")
     return path
 
 
@@ -117,12 +116,10 @@ def write_video(path: Path, frames: Iterable[np.ndarray], fps: int) -> Path:
     suffix = path.suffix.lower()
     if suffix not in (".mp4", ".gif"):
         raise ValueError(f"{path}: video must end in .mp4 or .gif")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(f"{path.stem}.partial{suffix}")
     stack = np.stack(list(frames))
-    if suffix == ".gif":
-        iio.imwrite(partial, stack, duration=1000 / fps, loop=0)
-    else:
-        iio.imwrite(partial, stack, fps=fps, codec="libx264", macro_block_size=1)
-    partial.replace(path)
+    with atomic_output(path) as partial:
+        if suffix == ".gif":
+            iio.imwrite(partial, stack, duration=1000 / fps, loop=0)
+        else:
+            iio.imwrite(partial, stack, fps=fps, codec="libx264", macro_block_size=1)
     return path
