@@ -100,3 +100,41 @@ def test_build_manifest_names_a_corrupt_file(episodes_copy: Path) -> None:
 def test_manifest_parquet_is_plain(tiny_dataset: tuple) -> None:
     manifest_path, _, _ = tiny_dataset
     assert pq.read_metadata(manifest_path).num_rows > 0
+
+
+def test_batched_image_embedding_writes_the_table_lerobot_writes(tmp_path: Path) -> None:
+    import datasets
+    from lerobot.datasets import dataset_writer, io_utils
+    from lerobot.datasets.feature_utils import get_hf_features_from_features
+    from PIL import Image
+
+    from mor.data.lerobot_build import batched_image_embedding, embed_images_batched
+    from mor.data.schema import lerobot_features
+
+    rng = np.random.default_rng(0)
+    paths = []
+    for index in range(7):
+        paths.append(str(tmp_path / f"frame-{index}.png"))
+        Image.fromarray(rng.integers(0, 256, (16, 16, 3), dtype=np.uint8)).save(paths[-1])
+    features = get_hf_features_from_features(lerobot_features(16))
+    columns = {name: [_feature_example(feature, index) for index in range(len(paths))]
+               for name, feature in features.items() if name != "observation.image"}
+    dataset = datasets.Dataset.from_dict({"observation.image": paths, **columns}, features=features)
+
+    ours = embed_images_batched(dataset).with_format("arrow")[:]
+    theirs = io_utils.embed_images(dataset).with_format("arrow")[:]
+    assert ours.equals(theirs)
+    assert ours.column("observation.image")[0].as_py()["bytes"] == Path(paths[0]).read_bytes()
+    # The substitution holds only inside the block.
+    with batched_image_embedding():
+        assert dataset_writer.embed_images is embed_images_batched is io_utils.embed_images
+    assert dataset_writer.embed_images is not embed_images_batched and io_utils.embed_images is not embed_images_batched
+
+
+def _feature_example(feature: object, index: int) -> object:
+    """A value of the datasets ``feature`` (a scalar Value or a fixed-length List of Values)."""
+    import datasets
+
+    if isinstance(feature, datasets.Value):
+        return index
+    return [index] * feature.length
