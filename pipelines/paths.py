@@ -13,6 +13,7 @@ LEROBOT = DATASETS / "lerobot"
 DATASET_CARD = Path("cards/dataset")
 VALIDATION_REPORT = DATASETS / "validation" / "report.json"
 COLLECT_STATS = DATASETS / "collect_stats.json"
+BUILD_STATS = DATASETS / "build_stats.json"
 EPISODE_FOLDERS = (EPISODES, REAL_EPISODES)
 LNET = DATASETS / "lnet"                  # training run: checkpoint.pt (resume), model.pt (best), log.csv
 LNET_CALIBRATION = LNET / "calibration.json"

@@ -45,9 +45,13 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
         info = json.loads((workspace / f"datasets/lerobot/{split}/meta/info.json").read_text())
         assert info["total_episodes"] == sum(1 for s in manifest["split"].to_pylist() if s == split)
     assert (workspace / "cards/dataset/README.md").is_file()
+    build_stats = json.loads((workspace / "datasets/build_stats.json").read_text())
+    assert build_stats["frames"] == stats["frames"] and sum(build_stats["episodes"].values()) == episodes
+    assert build_stats["seconds"]["total"] >= build_stats["seconds"]["lerobot"] > 0
 
     _run("validate")
-    assert json.loads((workspace / "datasets/validation/report.json").read_text())["ok"]
+    report = json.loads((workspace / "datasets/validation/report.json").read_text())
+    assert report["ok"] and report["seconds"] > 0
 
     # A second collect changes nothing: everything is already there.
     assert "collected 0 episodes" in _run("collect", "--profile", "tiny")

@@ -87,6 +87,19 @@ def batched_image_embedding() -> Iterator[None]:
             module.embed_images = original
 
 
+def sort_stats(root: Path) -> None:
+    """Rewrite the LeRobot dataset's ``meta/stats.json`` with its features in sorted order.
+
+    lerobot's ``aggregate_stats`` orders the features by iterating a set, so the order (and the file's bytes)
+    changes with ``PYTHONHASHSEED``; sorted, the same episodes always give the same dataset bytes.
+    """
+    from lerobot.datasets.io_utils import load_stats, write_stats  # noqa: PLC0415 - heavy import
+
+    stats = load_stats(root)
+    if stats is not None:
+        write_stats(dict(sorted(stats.items())), root)
+
+
 def _stamp(root: Path) -> dict:
     stamp = root / BUILD_STAMP
     return json.loads(stamp.read_text()) if stamp.is_file() else {}
@@ -219,6 +232,7 @@ def build_splits(
             with batched_image_embedding():
                 aggregate_datasets([f"mor/{split}-shard{job.index:03d}" for job in jobs], f"mor/{split}",
                                    roots=[job.root for job in jobs], aggr_root=partial, concatenate_data=False)
+            sort_stats(partial)
         else:
             partial.mkdir(parents=True)
         (partial / BUILD_STAMP).write_text(json.dumps(split_stamp) + "\n")

@@ -90,6 +90,15 @@ def test_build_is_stamped_with_the_dataset_version(tiny_dataset: tuple) -> None:
     assert not (root / ".shards").exists()
 
 
+def test_split_statistics_are_in_a_fixed_order(tiny_dataset: tuple) -> None:
+    # lerobot orders aggregated statistics by a set's iteration order; the build sorts them so that the same
+    # episodes give the same bytes (DVC hashes them) whatever PYTHONHASHSEED is.
+    _, root, _ = tiny_dataset
+    for split in SPLITS:
+        features = list(json.loads((root / split / "meta" / "stats.json").read_text()))
+        assert features == sorted(features) and "observation.image" in features
+
+
 def test_build_manifest_names_a_corrupt_file(episodes_copy: Path) -> None:
     bad = sorted(episodes_copy.glob("*.mcap"))[0]
     bad.write_bytes(b"not an mcap file")
