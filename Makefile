@@ -5,6 +5,8 @@ PYTHON ?= $(shell for p in $$HOME/.pyenv/versions/3.12*/bin/python3.12 python3.1
 	"$$p" -c 'import sys; assert sys.version_info[:2] == (3, 12)' 2>/dev/null && { echo "$$p"; break; }; done)
 VENV := .venv
 BIN := $(VENV)/bin
+# dvc runs each stage's `mor ...` command in a shell: it must find this checkout's environment first.
+export PATH := $(abspath $(BIN)):$(PATH)
 export MUJOCO_GL ?= egl
 export HF_HUB_OFFLINE := 1
 export HF_DATASETS_OFFLINE := 1
