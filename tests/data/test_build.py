@@ -147,3 +147,18 @@ def _feature_example(feature: object, index: int) -> object:
     if isinstance(feature, datasets.Value):
         return index
     return [index] * feature.length
+
+
+def test_scratch_falls_back_to_the_temporary_folder_when_shared_memory_is_small(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import shutil
+    from collections import namedtuple
+
+    from mor.data import lerobot_build
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda _: usage(64 << 20, 0, 64 << 20))  # Docker's default /dev/shm
+    assert lerobot_build.scratch_dir() is None
+    monkeypatch.setattr(shutil, "disk_usage", lambda _: usage(8 << 30, 0, 8 << 30))
+    assert lerobot_build.scratch_dir() in (None, Path("/dev/shm"))  # None only where there is no /dev/shm
