@@ -260,21 +260,23 @@ def eval_lnet_command(profile: ProfileOption = "default", params: ParamsOption =
 @app.command("ablate-lnet")
 @one_line_errors
 def ablate_lnet_command(
+    study: Annotated[str, typer.Option(help="Which variants: actions (previous action as LSTM input or not) or "
+                                            "object_head (global MLP or class attention).")] = "actions",
     steps: Annotated[int, typer.Option(help="Training steps per variant.")] = 300,
     episodes: Annotated[int, typer.Option(help="Validation/test episodes used to calibrate and score.")] = 100,
     profile: ProfileOption = "default",
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
-    """Train the L-Net with and without the previous action as input (equal budgets) and compare on test."""
+    """Train the variants of one L-Net study at equal budgets and compare them on test."""
     from pipelines import ablate_lnet
 
-    result = ablate_lnet.run(load_profile(profile, params), steps, episodes)
-    for name in ("with_actions", "without_actions"):
-        m = result[name]
-        typer.echo(f"{name}: agent {m['agent_position_error_m']['median']:.3f} m, heading "
-                   f"{m['heading_error_deg']['median']:.2f} deg, seen objects "
-                   f"{m['object_position_error_m']['seen']['median']:.3f} m, NLL agent {m['nll']['agent_position']:.3f}")
-    typer.echo(f"wrote {ablate_lnet.ABLATION / 'results.json'}")
+    result = ablate_lnet.run(load_profile(profile, params), study, steps, episodes)
+    for name, m in result.items():
+        if isinstance(m, dict) and "nll" in m:
+            typer.echo(f"{name}: agent {m['agent_position_error_m']['median']:.3f} m, heading "
+                       f"{m['heading_error_deg']['median']:.2f} deg, seen objects "
+                       f"{m['object_position_error_m']['seen']['median']:.3f} m, NLL agent {m['nll']['agent_position']:.3f}")
+    typer.echo(f"wrote {ablate_lnet.ABLATION / study / 'results.json'}")
 
 
 @bench_app.command("sim")

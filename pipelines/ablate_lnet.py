@@ -1,4 +1,4 @@
-"""``mor ablate-lnet``: the L-Net with and without the previous action as LSTM input, at an equal step budget."""
+"""``mor ablate-lnet``: variants of the L-Net (``mor.lnet.params.ABLATIONS``) at an equal step budget."""
 
 from __future__ import annotations
 
@@ -6,7 +6,9 @@ from typing import Any
 
 from mor.config import Profile
 from mor.data.manifest import manifest_version, read_manifest
+from mor.errors import MorError
 from mor.lnet.evaluate import fit_calibration, metrics, predict
+from mor.lnet.params import ABLATIONS
 from mor.lnet.train import BEST, load_model, pick_device, signature, train
 from pipelines import paths
 from pipelines.io import write_json
@@ -14,16 +16,18 @@ from pipelines.io import write_json
 ABLATION = paths.DATASETS / "lnet_ablation"
 
 
-def run(profile: Profile, steps: int, episodes: int) -> dict[str, Any]:
-    """Train both variants for ``steps`` steps (same seed, data and other parameters), calibrate each on
-    validation, and score each on the first ``episodes`` test episodes."""
+def run(profile: Profile, study: str, steps: int, episodes: int) -> dict[str, Any]:
+    """Train each variant of ``study`` for ``steps`` steps (same seed, data and other parameters), calibrate each
+    on validation, score each on the first ``episodes`` test episodes; writes ``<ABLATION>/<study>/results.json``."""
+    if study not in ABLATIONS:
+        raise MorError(f"--study: unknown study {study!r}; choose one of {', '.join(ABLATIONS)}")
     version = manifest_version(read_manifest(paths.MANIFEST))
     device = pick_device()
     params = profile.lnet.train.model_copy(update={"max_steps": steps, "patience": 10**6})
-    results: dict[str, Any] = {"steps": steps, "test_episodes": episodes, "dataset_version": version}
-    for name, use_actions in (("with_actions", True), ("without_actions", False)):
-        config = profile.lnet.model.model_copy(update={"use_actions": use_actions})
-        out = ABLATION / name
+    results: dict[str, Any] = {"study": study, "steps": steps, "test_episodes": episodes, "dataset_version": version}
+    for name, overrides in ABLATIONS[study].items():
+        config = profile.lnet.model.model_copy(update=overrides)
+        out = ABLATION / study / name
         summary = train(config, params, paths.LEROBOT / "train", paths.LEROBOT / "validation", out, version, device)
         model = load_model(out / BEST, signature(config, version, summary["image_size"]), device)
         calibration = fit_calibration(predict(model, paths.LEROBOT / "validation", episodes, device))
@@ -31,5 +35,5 @@ def run(profile: Profile, steps: int, episodes: int) -> dict[str, Any]:
         results[name] = {key: scored[key] for key in ("nll", "agent_position_error_m", "heading_error_deg",
                                                       "object_position_error_m", "coverage")}
         results[name]["best_validation_loss"] = summary["best_validation_loss"]
-    write_json(ABLATION / "results.json", results)
+    write_json(ABLATION / study / "results.json", results)
     return results

@@ -73,3 +73,10 @@ def test_validate_without_a_manifest_is_one_clear_line(workspace: Path) -> None:
     result = CliRunner().invoke(app, ["validate"])
     assert result.exit_code == 2
     assert result.output.strip().splitlines() == ["error: datasets/manifest.parquet: no manifest; run mor build-dataset first"]
+
+
+def test_an_unknown_ablation_study_is_one_clear_line(workspace: Path) -> None:
+    result = CliRunner().invoke(app, ["ablate-lnet", "--study", "colour"])
+    assert result.exit_code == 2
+    assert result.output.strip().splitlines() == [
+        "error: --study: unknown study 'colour'; choose one of actions, object_head"]

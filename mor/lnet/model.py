@@ -63,12 +63,21 @@ class CompactEncoder(nn.Module):
         self.features = nn.Sequential(*layers, nn.AdaptiveAvgPool2d(4), nn.Flatten())
         self.project = nn.Sequential(nn.Linear(128 * 16, feature_dim), nn.ReLU())
 
+    channels = 128
+
+    def encode(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(N, 3, H, W) -> features (N, D) and the spatial map they come from, (N, 128, 4, 4)."""
+        spatial = self.features[:-1](images)
+        return self.project(spatial.flatten(1)), spatial
+
     def forward(self, images: torch.Tensor) -> torch.Tensor:
-        return self.project(self.features(images))
+        return self.encode(images)[0]
 
 
 class ResNet18Encoder(nn.Module):
     """torchvision's ResNet18, randomly initialized (no weights can be downloaded), -> (N, D)."""
+
+    channels = 512
 
     def __init__(self, feature_dim: int) -> None:
         super().__init__()
@@ -77,8 +86,35 @@ class ResNet18Encoder(nn.Module):
         self.backbone = resnet18(weights=None)
         self.backbone.fc = nn.Sequential(nn.Linear(512, feature_dim), nn.ReLU())
 
+    def encode(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(N, 3, H, W) -> features (N, D) and the last stage's map resampled to 4x4, (N, 512, 4, 4)."""
+        net = self.backbone
+        stem = net.maxpool(net.relu(net.bn1(net.conv1(images))))
+        last = net.layer4(net.layer3(net.layer2(net.layer1(stem))))
+        return net.fc(net.avgpool(last).flatten(1)), nn.functional.adaptive_avg_pool2d(last, 4)
+
     def forward(self, images: torch.Tensor) -> torch.Tensor:
-        return self.backbone(images)
+        return self.encode(images)[0]
+
+
+class ObjectAttention(nn.Module):
+    """Each object slot's class embedding attends over the encoder's 4x4 map: where in the image that class is.
+
+    spatial (N, C, 4, 4), embedded (N, K, E) -> (N, K, C): the attention-weighted cells, each cell's feature plus
+    a learned embedding of its position, so the result says both what was found and where.
+    """
+
+    cells = 16
+
+    def __init__(self, channels: int, embedding_dim: int) -> None:
+        super().__init__()
+        self.query = nn.Linear(embedding_dim, channels)
+        self.position = nn.Parameter(0.02 * torch.randn(self.cells, channels))
+
+    def forward(self, spatial: torch.Tensor, embedded: torch.Tensor) -> torch.Tensor:
+        keys = spatial.flatten(2).transpose(1, 2) + self.position
+        scores = torch.einsum("nkc,nsc->nks", self.query(embedded), keys) / keys.shape[-1] ** 0.5
+        return torch.einsum("nks,nsc->nkc", scores.softmax(-1), keys)
 
 
 def _agent_distribution(raw: torch.Tensor) -> tuple[torch.Tensor, ...]:
@@ -95,15 +131,22 @@ class PoseNet(nn.Module):
         self.encoder = encoder(config.feature_dim)
         self.embed = nn.Embedding(N_CLASSES + 1, config.class_embedding_dim)
         self.agent_head = _mlp(config.feature_dim, config.mlp_hidden, 8)
-        self.object_head = _mlp(config.feature_dim + config.class_embedding_dim, config.mlp_hidden, 5)
+        object_inputs = config.feature_dim + config.class_embedding_dim
+        self.attention = None
+        if config.object_head == "attention":
+            self.attention = ObjectAttention(encoder.channels, config.class_embedding_dim)
+            object_inputs += encoder.channels
+        self.object_head = _mlp(object_inputs, config.mlp_hidden, 5)
 
     def forward(self, images: torch.Tensor, classes: torch.Tensor) -> PoseEstimate:
         """images (N, 3, H, W), classes (N, K) -> PoseEstimate with leading dim N (objects in the ego frame)."""
-        features = self.encoder(images)
+        features, spatial = self.encoder.encode(images)
         mean, tril, heading, kappa = _agent_distribution(self.agent_head(features))
         embedded = self.embed(torch.where(classes >= 0, classes, torch.full_like(classes, _ABSENT)))
-        per_object = torch.cat([features.unsqueeze(1).expand(-1, K, -1), embedded], -1)
-        raw = self.object_head(per_object)
+        object_inputs = [features.unsqueeze(1).expand(-1, K, -1), embedded]
+        if self.attention is not None:
+            object_inputs.append(self.attention(spatial, embedded))
+        raw = self.object_head(torch.cat(object_inputs, -1))
         return PoseEstimate(mean, tril, heading, kappa, raw[..., :2], scale_tril(raw[..., 2:5]), "ego")
 
 

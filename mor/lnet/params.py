@@ -18,6 +18,9 @@ class LNetConfig(BaseModel):
     mlp_hidden: int = Field(256, ge=8)
     lstm_hidden: int = Field(256, ge=8)
     use_actions: bool = Field(True, description="feed the previous action to the LSTM (our addition)")
+    object_head: Literal["global", "attention"] = Field(
+        "global", description="object positions from the image's global feature (the paper's MLP) or from the "
+                              "cells of the encoder's map that each object's class attends to (our addition)")
 
 
 class TrainParams(BaseModel):
@@ -56,3 +59,10 @@ class LNetParams(BaseModel):
     train: TrainParams = Field(default_factory=TrainParams)
     calibration: CalibrationParams = Field(default_factory=CalibrationParams)
     eval_episodes: int = Field(200, ge=1, description="test episodes evaluated (all of them if fewer)")
+
+
+# `mor ablate-lnet --study NAME`: named variants of the profile's LNetConfig, trained and scored at equal budgets.
+ABLATIONS: dict[str, dict[str, dict[str, object]]] = {
+    "actions": {"with_actions": {"use_actions": True}, "without_actions": {"use_actions": False}},
+    "object_head": {"global": {"object_head": "global"}, "attention": {"object_head": "attention"}},
+}

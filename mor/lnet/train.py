@@ -52,9 +52,14 @@ def signature(config: LNetConfig, dataset_version: str, image_size: int) -> dict
 
 
 def check_compatible(saved: dict[str, Any], path: Path, expected: dict[str, Any]) -> None:
-    """Raise CheckpointMismatch (one line naming both sides) unless ``saved`` has the ``expected`` signature."""
+    """Raise CheckpointMismatch (one line naming both sides) unless ``saved`` has the ``expected`` signature.
+
+    A saved config is read through ``LNetConfig``, so one written before a field existed has that field's default.
+    """
     for key, ours in expected.items():
         theirs = saved.get(key)
+        if key == "config" and isinstance(theirs, dict):
+            theirs = LNetConfig(**theirs).model_dump()
         if theirs != ours:
             if isinstance(ours, dict) and isinstance(theirs, dict):
                 theirs, ours = ({k: v for k, v in theirs.items() if ours.get(k) != v},

@@ -9,7 +9,7 @@ import torch
 from mor.lnet.evaluate import NOMINAL_2D, Calibration, Predictions, fit_calibration, metrics
 from mor.lnet.frames import ego_to_world, world_to_ego
 from mor.lnet.loss import lnet_loss, previous_actions
-from mor.lnet.model import LNet
+from mor.lnet.model import LNet, ObjectAttention
 from mor.lnet.params import LNetConfig
 from mor.sim import geometry
 
@@ -39,9 +39,10 @@ def test_torch_frames_agree_with_the_simulator_geometry() -> None:
     np.testing.assert_allclose(back.numpy(), points, atol=1e-12)
 
 
+@pytest.mark.parametrize("object_head", ["global", "attention"])
 @pytest.mark.parametrize("encoder", ["compact", "resnet18"])
-def test_lnet_shapes(encoder: str) -> None:
-    model = LNet(SMALL.model_copy(update={"encoder": encoder}))
+def test_lnet_shapes(encoder: str, object_head: str) -> None:
+    model = LNet(SMALL.model_copy(update={"encoder": encoder, "object_head": object_head}))
     batch = _batch()
     single, tracked, state = model(batch["images"], batch["object_classes"], batch["held"],
                                    previous_actions(batch["actions"]))
@@ -49,6 +50,21 @@ def test_lnet_shapes(encoder: str) -> None:
     assert tracked.agent_mean.shape == (2, 4, 2) and tracked.agent_tril.shape == (2, 4, 2, 2)
     assert tracked.object_mean.shape == (2, 4, 5, 2) and tracked.kappa.shape == (2, 4)
     assert torch.all(tracked.kappa > 0) and state[0].shape == (1, 2, 32)
+
+
+def test_attention_finds_each_object_in_its_own_cells() -> None:
+    # Two slots of different classes attend to different cells when the map makes one cell match each query.
+    attention = ObjectAttention(channels=4, embedding_dim=2)
+    with torch.no_grad():
+        attention.query.weight.copy_(torch.tensor([[40.0, 0.0], [0.0, 40.0], [0.0, 0.0], [0.0, 0.0]]))
+        attention.query.bias.zero_()
+        attention.position.zero_()
+    spatial = torch.zeros(1, 4, 4, 4)
+    spatial[0, 0, 1, 2] = 1.0  # channel 0 lights up in cell (1, 2), channel 1 in cell (3, 0)
+    spatial[0, 1, 3, 0] = 1.0
+    attended = attention(spatial, torch.tensor([[[1.0, 0.0], [0.0, 1.0]]]))
+    torch.testing.assert_close(attended[0, 0, :2], torch.tensor([1.0, 0.0]), atol=1e-3, rtol=0)
+    torch.testing.assert_close(attended[0, 1, :2], torch.tensor([0.0, 1.0]), atol=1e-3, rtol=0)
 
 
 def test_absent_objects_do_not_change_the_loss() -> None:

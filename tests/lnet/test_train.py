@@ -49,6 +49,23 @@ def test_foreign_checkpoints_are_refused_with_both_sides_named(tiny_dataset: tup
                    torch.device("cpu"))
 
 
+def test_a_checkpoint_from_before_a_config_field_existed_loads_with_its_default(
+    tiny_dataset: tuple, tmp_path: Path,
+) -> None:
+    manifest, root, _ = tiny_dataset
+    version = manifest_version(read_manifest(manifest))
+    train(CONFIG, PARAMS.model_copy(update={"max_steps": 1}), root / "train", root / "validation", tmp_path, version,
+          progress=False)
+    saved = torch.load(tmp_path / BEST, weights_only=False)
+    del saved["config"]["object_head"]  # as written before the option existed
+    torch.save(saved, tmp_path / "old.pt")
+    model = load_model(tmp_path / "old.pt", signature(CONFIG, version, 16), torch.device("cpu"))
+    assert model.config.object_head == "global" and model.posenet.attention is None
+    with pytest.raises(CheckpointMismatch, match="object_head"):
+        load_model(tmp_path / "old.pt", signature(CONFIG.model_copy(update={"object_head": "attention"}), version, 16),
+                   torch.device("cpu"))
+
+
 def test_predict_calibrate_and_score_whole_episodes(tiny_dataset: tuple, tmp_path: Path) -> None:
     manifest, root, rows = tiny_dataset
     version = manifest_version(read_manifest(manifest))
