@@ -13,9 +13,13 @@ import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from tqdm import tqdm
+
+if TYPE_CHECKING:
+    import datasets
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 # lerobot warns on import that torchcodec is missing; image datasets never decode video, so say it once, not per shard.
@@ -57,7 +61,7 @@ def episode_frames(episode: EpisodeData) -> list[dict[str, np.ndarray | str]]:
     ]
 
 
-def embed_images_batched(dataset):  # noqa: ANN001, ANN201 - datasets.Dataset in and out, imported lazily
+def embed_images_batched(dataset: datasets.Dataset) -> datasets.Dataset:
     """lerobot's ``embed_images``, one Arrow batch per call instead of one row per call.
 
     lerobot 0.6.1 embeds PNG bytes with ``Dataset.map(embed_table_storage, batched=False)``: the function is
