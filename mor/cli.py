@@ -268,14 +268,15 @@ def ablate_lnet_command(
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
     """Train the variants of one L-Net study at equal budgets and compare them on test."""
+    from mor.lnet.params import ABLATIONS
     from pipelines import ablate_lnet
 
     result = ablate_lnet.run(load_profile(profile, params), study, steps, episodes)
-    for name, m in result.items():
-        if isinstance(m, dict) and "nll" in m:
-            typer.echo(f"{name}: agent {m['agent_position_error_m']['median']:.3f} m, heading "
-                       f"{m['heading_error_deg']['median']:.2f} deg, seen objects "
-                       f"{m['object_position_error_m']['seen']['median']:.3f} m, NLL agent {m['nll']['agent_position']:.3f}")
+    for name in ABLATIONS[study]:
+        m = result[name]
+        typer.echo(f"{name}: agent {m['agent_position_error_m']['median']:.3f} m, heading "
+                   f"{m['heading_error_deg']['median']:.2f} deg, seen objects "
+                   f"{m['object_position_error_m']['seen']['median']:.3f} m, NLL agent {m['nll']['agent_position']:.3f}")
     typer.echo(f"wrote {ablate_lnet.ABLATION / study / 'results.json'}")
 
 

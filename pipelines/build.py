@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import os
-import time
 from typing import Any
 
 from mor.config import Profile
 from mor.data.lerobot_build import build_splits
 from mor.data.manifest import build_manifest, manifest_version, write_manifest
+from mor.timing import timed
 from pipelines import paths
 from pipelines.io import write_json
 
@@ -21,22 +21,19 @@ def run(profile: Profile, workers: int | None = None) -> dict[str, Any]:
 
     workers = workers or profile.build.workers
     seconds: dict[str, float] = {}
-    start = time.perf_counter()
-    files = [path for folder in paths.EPISODE_FOLDERS for path in sorted(folder.glob("*.mcap"))]
-    table = build_manifest(files, paths.DATASETS)
-    write_manifest(table, paths.MANIFEST)
-    version = manifest_version(table)
-    seconds["manifest"] = time.perf_counter() - start
-    start = time.perf_counter()
-    counts = build_splits(table.to_pylist(), paths.DATASETS, paths.LEROBOT, version, profile.sim.image_size,
-                          profile.collect.fps, workers, profile.build.shard_episodes)
-    seconds["lerobot"] = time.perf_counter() - start
-    start = time.perf_counter()
-    arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
-    card = write_dataset_card(paths.MANIFEST, paths.DATASETS, paths.DATASET_CARD, profile.model_dump(mode="json"),
-                              arena, datasets_root_rel=os.path.relpath(paths.LEROBOT, paths.DATASET_CARD),
-                              workers=workers)
-    seconds["card"] = time.perf_counter() - start
+    with timed(seconds, "manifest"):
+        files = [path for folder in paths.EPISODE_FOLDERS for path in sorted(folder.glob("*.mcap"))]
+        table = build_manifest(files, paths.DATASETS)
+        write_manifest(table, paths.MANIFEST)
+        version = manifest_version(table)
+    with timed(seconds, "lerobot"):
+        counts = build_splits(table.to_pylist(), paths.DATASETS, paths.LEROBOT, version, profile.sim.image_size,
+                              profile.collect.fps, workers, profile.build.shard_episodes)
+    with timed(seconds, "card"):
+        arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
+        card = write_dataset_card(paths.MANIFEST, paths.DATASETS, paths.DATASET_CARD,
+                                  profile.model_dump(mode="json"), arena,
+                                  datasets_root_rel=os.path.relpath(paths.LEROBOT, paths.DATASET_CARD), workers=workers)
     result = {"dataset_version": version, "episodes": counts, "frames": int(sum(table.column("n_frames").to_pylist())),
               "workers": workers, "seconds": {**seconds, "total": sum(seconds.values())}}
     write_json(paths.BUILD_STATS, result)

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import time
-
 from mor.data.manifest import read_manifest
 from mor.data.validate import ValidationReport, validate
+from mor.timing import timed
 from pipelines import paths
 from pipelines.io import write_json
 
@@ -13,7 +12,9 @@ from pipelines.io import write_json
 def run() -> ValidationReport:
     """Validate the manifest's episodes and splits; write the report with its wall time in seconds (also when
     problems were found)."""
-    start = time.perf_counter()
-    report = validate(read_manifest(paths.MANIFEST).to_pylist(), paths.DATASETS, paths.EPISODE_FOLDERS, paths.LEROBOT)
-    write_json(paths.VALIDATION_REPORT, {**report.to_json(), "seconds": time.perf_counter() - start})
+    seconds: dict[str, float] = {}
+    with timed(seconds, "validate"):
+        report = validate(read_manifest(paths.MANIFEST).to_pylist(), paths.DATASETS, paths.EPISODE_FOLDERS,
+                          paths.LEROBOT)
+    write_json(paths.VALIDATION_REPORT, {**report.to_json(), "seconds": seconds["validate"]})
     return report

@@ -55,15 +55,15 @@ class CompactEncoder(nn.Module):
     The spatial layout is kept (no global pooling): where a wall corner or an object appears is the signal.
     """
 
+    channels = 128  # of the last conv layer, i.e. of the spatial map
+
     def __init__(self, feature_dim: int) -> None:
         super().__init__()
         layers: list[nn.Module] = []
         for cin, cout in ((3, 32), (32, 64), (64, 128), (128, 128)):
             layers += [nn.Conv2d(cin, cout, 3, stride=2, padding=1), nn.GroupNorm(8, cout), nn.ReLU()]
         self.features = nn.Sequential(*layers, nn.AdaptiveAvgPool2d(4), nn.Flatten())
-        self.project = nn.Sequential(nn.Linear(128 * 16, feature_dim), nn.ReLU())
-
-    channels = 128
+        self.project = nn.Sequential(nn.Linear(self.channels * 16, feature_dim), nn.ReLU())
 
     def encode(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(N, 3, H, W) -> features (N, D) and the spatial map they come from, (N, 128, 4, 4)."""

@@ -52,14 +52,9 @@ def signature(config: LNetConfig, dataset_version: str, image_size: int) -> dict
 
 
 def check_compatible(saved: dict[str, Any], path: Path, expected: dict[str, Any]) -> None:
-    """Raise CheckpointMismatch (one line naming both sides) unless ``saved`` has the ``expected`` signature.
-
-    A saved config is read through ``LNetConfig``, so one written before a field existed has that field's default.
-    """
+    """Raise CheckpointMismatch (one line naming both sides) unless ``saved`` has the ``expected`` signature."""
     for key, ours in expected.items():
         theirs = saved.get(key)
-        if key == "config" and isinstance(theirs, dict):
-            theirs = LNetConfig(**theirs).model_dump()
         if theirs != ours:
             if isinstance(ours, dict) and isinstance(theirs, dict):
                 theirs, ours = ({k: v for k, v in theirs.items() if ours.get(k) != v},
@@ -68,12 +63,21 @@ def check_compatible(saved: dict[str, Any], path: Path, expected: dict[str, Any]
                                      "(mor train-lnet) or use the checkpoint that matches the data and profile")
 
 
+def load_checkpoint(path: Path, expected: dict[str, Any], device: torch.device) -> dict[str, Any]:
+    """The checkpoint at ``path``, checked against the ``expected`` signature. Its config is read through
+    ``LNetConfig``, so a checkpoint written before a config field existed has that field's default."""
+    saved = torch.load(path, map_location=device, weights_only=False)
+    if isinstance(saved.get("config"), dict):
+        saved["config"] = LNetConfig(**saved["config"]).model_dump()
+    check_compatible(saved, path, expected)
+    return saved
+
+
 def load_model(path: Path, expected: dict[str, Any], device: torch.device) -> LNet:
     """The weights at ``path`` in a fresh LNet, after checking the checkpoint's signature."""
     if not path.is_file():
         raise MorError(f"{path}: no L-Net checkpoint; run mor train-lnet first")
-    saved = torch.load(path, map_location=device, weights_only=False)
-    check_compatible(saved, path, expected)
+    saved = load_checkpoint(path, expected, device)
     model = LNet(LNetConfig(**saved["config"])).to(device)
     model.load_state_dict(saved["model"])
     return model.eval()
@@ -114,8 +118,7 @@ def train(config: LNetConfig, params: TrainParams, train_root: Path, validation_
     step, best, stale = 0, float("inf"), 0
     checkpoint_path = out_dir / CHECKPOINT
     if checkpoint_path.is_file():
-        saved = torch.load(checkpoint_path, map_location=device, weights_only=False)
-        check_compatible(saved, checkpoint_path, expected)
+        saved = load_checkpoint(checkpoint_path, expected, device)
         model.load_state_dict(saved["model"])
         optimizer.load_state_dict(saved["optimizer"])
         step, best, stale = saved["step"], saved["best"], saved["stale"]
