@@ -65,8 +65,8 @@ def embed_images_batched(dataset: datasets.Dataset) -> datasets.Dataset:
     """lerobot's ``embed_images``, one Arrow batch per call instead of one row per call.
 
     lerobot 0.6.1 embeds PNG bytes with ``Dataset.map(embed_table_storage, batched=False)``: the function is
-    applied to one-row tables, and each call rebuilds the feature schema (about 2.5 ms a row, more than half of
-    a shard build and nearly all of the aggregation). ``embed_table_storage`` is a per-row function of the table,
+    applied to one-row tables, and each call rebuilds the feature schema (in a profile of a shard build, more than
+    half of its time, and nearly all of the aggregation's). ``embed_table_storage`` is a per-row function of the table,
     so applying it to whole batches writes the same table; ``tests/data/test_build.py`` checks that it does.
     """
     from datasets.table import embed_table_storage  # noqa: PLC0415 - heavy import
@@ -117,7 +117,7 @@ def scratch_dir() -> Path | None:
     ``SCRATCH_MIN_FREE_BYTES`` free (else None: the system's temporary folder).
 
     lerobot writes every frame to its own PNG file and reads it back when the episode is saved. Creating a file
-    on these machines' disks costs 0.4-0.9 ms, against 0.02 ms on tmpfs, a large share of a shard's build time.
+    on these machines' disks costs far more than on tmpfs, and a shard creates one per frame.
     """
     shm = Path("/dev/shm")
     if shm.is_dir() and os.access(shm, os.W_OK) and shutil.disk_usage(shm).free >= SCRATCH_MIN_FREE_BYTES:
