@@ -12,17 +12,15 @@ import pytest
 import yaml
 from PIL import Image
 
-from mor.data.card import (
-    CARD_NAME,
+from mor.data.card import CARD_NAME, iter_card_links, write_dataset_card
+from mor.data.card_figures import write_coverage_png
+from mor.data.card_stats import (
     coverage_fraction,
     coverage_map,
     episode_events,
     inside_mask,
-    iter_card_links,
     mean_displacement,
     median_mean_displacement,
-    write_coverage_png,
-    write_dataset_card,
 )
 from mor.data.collect import CollectionSpec
 from mor.data.episode_io import EpisodeData, EpisodeHeader
