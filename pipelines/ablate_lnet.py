@@ -9,7 +9,9 @@ from mor.data.manifest import manifest_version, read_manifest
 from mor.errors import MorError
 from mor.lnet.evaluate import fit_calibration, metrics, predict
 from mor.lnet.params import ABLATIONS
-from mor.lnet.train import BEST, load_model, pick_device, signature, train
+from mor.lnet.checkpoint import signature
+from mor.lnet.runtime import load_lnet
+from mor.lnet.train import BEST, pick_device, train
 from pipelines import paths
 from pipelines.io import write_json
 
@@ -29,7 +31,7 @@ def run(profile: Profile, study: str, steps: int, episodes: int) -> dict[str, An
         config = profile.lnet.model.model_copy(update=overrides)
         out = ABLATION / study / name
         summary = train(config, params, paths.LEROBOT / "train", paths.LEROBOT / "validation", out, version, device)
-        model = load_model(out / BEST, signature(config, version, summary["image_size"]), device)
+        model = load_lnet(out / BEST, device, signature(config, version, summary["image_size"]), calibrated=False).model
         calibration = fit_calibration(predict(model, paths.LEROBOT / "validation", episodes, device))
         scored = metrics(calibration.apply(predict(model, paths.LEROBOT / "test", episodes, device)))
         results[name] = {key: scored[key] for key in ("nll", "agent_position_error_m", "heading_error_deg",

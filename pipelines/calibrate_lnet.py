@@ -13,10 +13,12 @@ from pipelines.lnet_io import load_trained
 
 
 def run(profile: Profile) -> dict[str, Any]:
-    model, device = load_trained(profile, paths.LNET / "model.pt")
-    predictions = predict(model, paths.LEROBOT / "validation", profile.lnet.calibration.max_episodes, device)
+    runner = load_trained(profile, paths.LNET / "model.pt", calibrated=False)
+    predictions = predict(runner.model, paths.LEROBOT / "validation", profile.lnet.calibration.max_episodes,
+                          runner.device)
     calibration = fit_calibration(predictions)
-    payload = {**asdict(calibration), "fitted_on": {"split": "validation", "frames": int(len(predictions.frame))},
+    payload = {**asdict(calibration), "dataset_version": runner.dataset_version,
+               "fitted_on": {"split": "validation", "frames": int(len(predictions.frame))},
                "validation_before": metrics(predictions)["coverage"],
                "validation_after": metrics(calibration.apply(predictions))["coverage"]}
     write_json(paths.LNET_CALIBRATION, payload)

@@ -17,7 +17,7 @@ from mor.lnet.figures import write_estimate_gif, write_estimate_strip, write_rel
 from mor.sim.arena import Arena
 from pipelines import paths
 from pipelines.io import write_json
-from pipelines.lnet_io import load_calibration, load_trained
+from pipelines.lnet_io import load_trained
 
 FIGURE_EPISODE = 0
 
@@ -25,9 +25,9 @@ FIGURE_EPISODE = 0
 def run(profile: Profile) -> dict[str, Any]:
     card = paths.LNET_CARD
     card.mkdir(parents=True, exist_ok=True)
-    model, device = load_trained(profile, paths.LNET / "model.pt")
-    calibration = load_calibration(paths.LNET_CALIBRATION)
-    predictions = predict(model, paths.LEROBOT / "test", profile.lnet.eval_episodes, device)
+    runner = load_trained(profile, paths.LNET / "model.pt")
+    calibration = runner.calibration
+    predictions = predict(runner.model, paths.LEROBOT / "test", profile.lnet.eval_episodes, runner.device)
     result = {
         "dataset_version": manifest_version(read_manifest(paths.MANIFEST)),
         "calibration": asdict(calibration),
@@ -49,7 +49,7 @@ def run(profile: Profile) -> dict[str, Any]:
              "object_classes": episode["object_classes"].numpy()}
     estimate = {name: getattr(shown, name) for name in ("agent_mean", "agent_tril", "heading", "kappa",
                                                         "object_mean", "object_tril")}
-    images = (episode["images"].permute(0, 2, 3, 1).numpy() * 255).round().astype(np.uint8)
+    images = episode["images"].numpy()
     arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
     frames = np.linspace(0, len(images) - 1, 6).round().astype(int).tolist()
     write_estimate_strip(card / "estimates_strip.png", arena, truth, estimate, frames, images)

@@ -27,6 +27,7 @@ logging.getLogger("lerobot.utils.import_utils").setLevel(logging.ERROR)
 
 from mor.data.episode_io import EpisodeData, read_episode  # noqa: E402
 from mor.data.manifest import SPLITS  # noqa: E402
+from mor.data.observations import pad_classes  # noqa: E402
 from mor.data.schema import MAX_OBJECTS, lerobot_features  # noqa: E402
 
 TASK_TEXT = "rearrange the objects to their targets"
@@ -44,7 +45,7 @@ def _padded(values: np.ndarray, fill: float, dtype: type) -> np.ndarray:
 def episode_frames(episode: EpisodeData) -> list[dict[str, np.ndarray | str]]:
     """The LeRobot frames of one episode, in ``lerobot_features`` layout."""
     header = episode.header
-    classes = _padded(header.object_classes, -1, np.int64)
+    classes = pad_classes(header.object_classes)
     targets = _padded(np.asarray(header.target_positions), 0.0, np.float32)
     return [
         {
@@ -125,6 +126,45 @@ def scratch_dir() -> Path | None:
     return None
 
 
+SCRATCH_PREFIX = "mor-build-"
+
+
+def scratch_prefix() -> str:
+    """The name prefix of this process's scratch folders: ``mor-build-<pid>-`` (the pid tells whose it is)."""
+    return f"{SCRATCH_PREFIX}{os.getpid()}-"
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def remove_stale_scratch(folders: tuple[Path | None, ...] | None = None) -> list[Path]:
+    """Delete the scratch folders that builds killed mid-shard (kill -9) left behind; returns them.
+
+    A folder is stale when its name is ``mor-build-<pid>-*``, this user owns it, and process ``pid`` is gone (on
+    this machine); a live build's folders, other users' and names without a pid are left alone. ``folders``
+    defaults to both places a build writes scratch: ``scratch_dir()`` and the system's temporary folder.
+    """
+    if folders is None:
+        folders = (scratch_dir(), Path(tempfile.gettempdir()))
+    removed = []
+    for folder in {Path(f) for f in folders if f is not None}:
+        for path in folder.glob(f"{SCRATCH_PREFIX}*"):
+            pid = path.name.removeprefix(SCRATCH_PREFIX).split("-", 1)[0]
+            with contextlib.suppress(OSError):  # gone meanwhile, or not ours to delete
+                if (pid.isdigit() and path.is_dir() and not path.is_symlink()
+                        and path.lstat().st_uid == os.getuid() and not _process_alive(int(pid))):
+                    shutil.rmtree(path)
+                    removed.append(path)
+    return removed
+
+
 def write_lerobot_dataset(
     episode_files: list[Path], root: Path, repo_id: str, stamp: dict, image_size: int, fps: float
 ) -> Path:
@@ -136,7 +176,7 @@ def write_lerobot_dataset(
     from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy import
 
     partial = root.with_name(root.name + ".partial")
-    with tempfile.TemporaryDirectory(prefix="mor-build-", dir=scratch_dir()) as scratch:
+    with tempfile.TemporaryDirectory(prefix=scratch_prefix(), dir=scratch_dir()) as scratch:
         work = Path(scratch) / root.name
         dataset = LeRobotDataset.create(repo_id=repo_id, fps=int(round(fps)), root=work,
                                         features=lerobot_features(image_size), robot_type=ROBOT_TYPE,
@@ -203,9 +243,12 @@ def build_splits(
 
     Each split is built in shards of ``shard_episodes`` episodes, in ``workers`` processes, then aggregated with
     lerobot's ``aggregate_datasets``. Finished shards and splits of the same version are kept, so an interrupted
-    build resumes where it stopped.
+    build resumes where it stopped; scratch folders that killed builds left behind are deleted first
+    (``remove_stale_scratch``).
     """
     from lerobot.datasets.aggregate import aggregate_datasets  # noqa: PLC0415 - heavy import
+
+    remove_stale_scratch()
 
     shards_dir = out_root / ".shards"
     counts: dict[str, int] = {}

@@ -15,6 +15,7 @@ import torch
 from torch.utils.data import Dataset
 
 from mor.data.episode_io import decode_png
+from mor.data.observations import images_to_tensor
 from mor.data.schema import MAX_OBJECTS
 
 _COLUMNS = ("observation.image", "observation.object_classes", "observation.held", "observation.target_positions",
@@ -25,7 +26,7 @@ class SequenceWindows(Dataset):
     """Windows of ``window`` frames (every ``stride`` frames) of the LeRobot split at ``root``; with
     ``window=None``, one item per whole episode (lengths may differ: use batch_size=1).
 
-    Item (T = window, K = MAX_OBJECTS = 5; metres, radians, world frame):
+    Item (T = window, K = MAX_OBJECTS = 5; metres, radians, world frame; ``mor.data.observations`` conventions):
       images (T, 3, H, W) float32 in [0, 1]; agent_pose (T, 3); object_positions (T, K, 2);
       held (T,) int64 (-1 none); actions (T,) int64 (taken after each frame, -1 after the last);
       object_classes (K,) int64 (-1 for absent slots); object_mask (K,) bool; target_positions (K, 2);
@@ -74,7 +75,7 @@ class SequenceWindows(Dataset):
         rows = slice(start, start + length)
         images = np.stack([decode_png(self._images[i].as_py()) for i in range(start, start + length)])
         item = {name: torch.from_numpy(values[rows].copy()) for name, values in self._labels.items()}
-        item["images"] = torch.from_numpy(images).permute(0, 3, 1, 2).float().div_(255.0)
+        item["images"] = images_to_tensor(images)
         item["object_classes"] = torch.from_numpy(self._classes[start].copy())
         item["object_mask"] = item["object_classes"] >= 0
         item["target_positions"] = torch.from_numpy(self._targets[start].copy())

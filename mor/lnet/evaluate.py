@@ -7,7 +7,7 @@ von Mises interval holding the 1-D normal's mass for k: 68.3%, 95.4%, 99.7%.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +18,7 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from mor.data.sequences import SequenceWindows
+from mor.lnet.calibration import Calibration
 from mor.lnet.likelihoods import gaussian_nll, log_i0, mahalanobis_squared, von_mises_nll
 from mor.lnet.model import LNet
 from mor.lnet.train import run_model, to_device
@@ -96,20 +97,6 @@ def predict(model: LNet, root: Path, max_episodes: int, device: torch.device, pr
 
 
 # ---- calibration ------------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Calibration:
-    """Multipliers of the stated standard deviations (agent, objects) and of the heading concentration."""
-
-    agent_scale: float = 1.0
-    object_scale: float = 1.0
-    kappa_scale: float = 1.0
-
-    def apply(self, predictions: Predictions) -> Predictions:
-        return replace(predictions, agent_tril=predictions.agent_tril * self.agent_scale,
-                       object_tril=predictions.object_tril * self.object_scale,
-                       kappa=predictions.kappa * self.kappa_scale)
-
-
 def _d2(truth: np.ndarray, mean: np.ndarray, tril: np.ndarray) -> np.ndarray:
     return mahalanobis_squared(*(torch.as_tensor(a, dtype=torch.float64) for a in (truth, mean, tril))).numpy()
 

@@ -33,6 +33,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Polygon, Wedge
 
 
+from mor.data.observations import tensor_to_images
 from mor.lnet.likelihoods import heading_halfwidth
 from mor.sim.arena import Arena
 from mor.sim.catalog import object_class
@@ -120,15 +121,14 @@ def as_estimate(estimate: Mapping[str, Any] | Any, n_frames: int, n_objects: int
 
 
 def as_frames(images: Any) -> np.ndarray:
-    """(T, H, W, 3) uint8 from (T, H, W, 3) uint8 or (T, 3, H, W) floats in [0, 1] (a ``SequenceWindows`` item)."""
+    """(T, H, W, 3) uint8 from (T, H, W, 3) uint8 or the network's (T, 3, H, W) floats in [0, 1] (a
+    ``SequenceWindows`` item), converted by ``mor.data.observations.tensor_to_images``."""
     frames = np.asarray(images)
-    if frames.ndim != 4 or 3 not in (frames.shape[1], frames.shape[3]):
-        raise ValueError(f"images: expected (T, H, W, 3) or (T, 3, H, W); got {frames.shape}")
-    if frames.shape[-1] != 3:
-        frames = frames.transpose(0, 2, 3, 1)
-    if frames.dtype != np.uint8:
-        frames = np.clip(np.rint(frames.astype(np.float64) * 255.0), 0, 255).astype(np.uint8)
-    return np.ascontiguousarray(frames)
+    if frames.ndim == 4 and frames.shape[3] == 3 and frames.dtype == np.uint8:
+        return np.ascontiguousarray(frames)
+    if frames.ndim == 4 and frames.shape[1] == 3 and frames.dtype.kind == "f":
+        return tensor_to_images(frames)
+    raise ValueError(f"images: expected (T, H, W, 3) uint8 or (T, 3, H, W) floats; got {frames.dtype} {frames.shape}")
 
 
 def _check_frame(t: int, n_frames: int) -> int:

@@ -176,6 +176,17 @@ class LNet(nn.Module):
         self.lstm = nn.LSTM(inputs, config.lstm_hidden, batch_first=True)
         self.head = nn.Linear(config.lstm_hidden, 8 + 5 * K)
 
+    def initial_state(self, n: int, device: torch.device | str = "cpu") -> tuple[torch.Tensor, torch.Tensor]:
+        """The state at the start of ``n`` episodes: zero LSTM (h, c), each (1, n, lstm_hidden)."""
+        zeros = torch.zeros(1, n, self.config.lstm_hidden, device=device)
+        return zeros, zeros.clone()
+
+    @staticmethod
+    def reset_state(state: tuple[torch.Tensor, torch.Tensor], done: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``state`` with the episodes where ``done`` (n,) bool is True back at their start."""
+        keep = (~done).to(state[0].dtype)[None, :, None]
+        return state[0] * keep, state[1] * keep
+
     def forward(
         self, images: torch.Tensor, classes: torch.Tensor, held: torch.Tensor, previous_actions: torch.Tensor,
         state: tuple[torch.Tensor, torch.Tensor] | None = None,

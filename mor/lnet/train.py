@@ -17,8 +17,7 @@ from torch.utils.data import DataLoader, Subset
 from tqdm import tqdm
 
 from mor.data.sequences import SequenceWindows
-from mor.atomic import atomic_output
-from mor.errors import MorError
+from mor.lnet.checkpoint import load_checkpoint, save_checkpoint, signature
 from mor.lnet.loss import lnet_loss, previous_actions
 from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig, TrainParams
@@ -26,10 +25,6 @@ from mor.lnet.params import LNetConfig, TrainParams
 CHECKPOINT = "checkpoint.pt"  # the latest state, to resume
 BEST = "model.pt"             # the best weights on validation
 LOG = "log.csv"
-
-
-class CheckpointMismatch(MorError):
-    """A checkpoint made with other parameters, data or image size than the run that loads it."""
 
 
 def pick_device() -> torch.device:
@@ -44,48 +39,6 @@ def to_device(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str,
 def run_model(model: LNet, batch: dict[str, torch.Tensor]) -> tuple:
     """The model on a loader batch -> (PoseNet estimates, LSTM estimates, LSTM state)."""
     return model(batch["images"], batch["object_classes"], batch["held"], previous_actions(batch["actions"]))
-
-
-def signature(config: LNetConfig, dataset_version: str, image_size: int) -> dict[str, Any]:
-    """What a checkpoint must agree on with the run that loads it."""
-    return {"config": config.model_dump(), "dataset_version": dataset_version, "image_size": image_size}
-
-
-def check_compatible(saved: dict[str, Any], path: Path, expected: dict[str, Any]) -> None:
-    """Raise CheckpointMismatch (one line naming both sides) unless ``saved`` has the ``expected`` signature."""
-    for key, ours in expected.items():
-        theirs = saved.get(key)
-        if theirs != ours:
-            if isinstance(ours, dict) and isinstance(theirs, dict):
-                theirs, ours = ({k: v for k, v in theirs.items() if ours.get(k) != v},
-                                {k: v for k, v in ours.items() if theirs.get(k) != v})
-            raise CheckpointMismatch(f"{path}: checkpoint {key} is {theirs} but this run's is {ours}; retrain "
-                                     "(mor train-lnet) or use the checkpoint that matches the data and profile")
-
-
-def load_checkpoint(path: Path, expected: dict[str, Any], device: torch.device) -> dict[str, Any]:
-    """The checkpoint at ``path``, checked against the ``expected`` signature. Its config is read through
-    ``LNetConfig``, so a checkpoint written before a config field existed has that field's default."""
-    saved = torch.load(path, map_location=device, weights_only=False)
-    if isinstance(saved.get("config"), dict):
-        saved["config"] = LNetConfig(**saved["config"]).model_dump()
-    check_compatible(saved, path, expected)
-    return saved
-
-
-def load_model(path: Path, expected: dict[str, Any], device: torch.device) -> LNet:
-    """The weights at ``path`` in a fresh LNet, after checking the checkpoint's signature."""
-    if not path.is_file():
-        raise MorError(f"{path}: no L-Net checkpoint; run mor train-lnet first")
-    saved = load_checkpoint(path, expected, device)
-    model = LNet(LNetConfig(**saved["config"])).to(device)
-    model.load_state_dict(saved["model"])
-    return model.eval()
-
-
-def _save(path: Path, payload: dict[str, Any]) -> None:
-    with atomic_output(path) as partial:
-        torch.save(payload, partial)
 
 
 @torch.no_grad()
@@ -164,8 +117,8 @@ def train(config: LNetConfig, params: TrainParams, train_root: Path, validation_
                 best, stale = (value, 0) if improved else (best, stale + 1)
                 state = {**expected, "params": params.model_dump(), "step": step}
                 if improved:
-                    _save(out_dir / BEST, {**state, "model": model.state_dict(), "validation_loss": value})
-                _save(checkpoint_path, {**state, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                    save_checkpoint(out_dir / BEST, {**state, "model": model.state_dict(), "validation_loss": value})
+                save_checkpoint(checkpoint_path, {**state, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
                                         "best": best, "stale": stale})
                 stopped_early = stale >= params.patience
             if step >= params.max_steps or stopped_early:

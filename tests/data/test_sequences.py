@@ -34,3 +34,32 @@ def test_windows_stay_inside_episodes_and_match_records(tiny_dataset: tuple, tin
 def test_missing_split_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match="mor build-dataset"):
         SequenceWindows(tmp_path, window=4)
+
+
+def test_environment_observations_and_dataset_windows_give_identical_tensors(
+    tiny_dataset: tuple, tiny_collection: Path, tiny_spec,
+) -> None:
+    # Replay a recorded episode in the environment (same seed, same actions) and convert each live observation
+    # with the streaming path; the dataset window of the same frames must hold exactly the same tensors.
+    import gymnasium as gym  # noqa: PLC0415
+    import torch  # noqa: PLC0415
+
+    from mor.data.collect import ENV_ID  # noqa: PLC0415
+    from mor.data.observations import env_to_network  # noqa: PLC0415
+
+    _, root, rows = tiny_dataset
+    train_rows = [r for r in rows if r["split"] == "train"]
+    window = SequenceWindows(root / "train", window=None)[0]
+    episode = read_episode(tiny_collection / train_rows[int(window["episode_index"])]["file"])
+    env = gym.make(ENV_ID, horizon=tiny_spec.episode_steps, **tiny_spec.sim.model_dump())
+    observation, _ = env.reset(seed=episode.header.seed)
+    live = []
+    for action in episode.actions:
+        live.append(env_to_network(observation["image"][None], observation["object_classes"][None],
+                                   np.array([observation["held"]])))
+        if action >= 0:  # -1: the last frame
+            observation, *_ = env.step(int(action))
+    env.close()
+    assert torch.equal(torch.cat([x.images for x in live]), window["images"])
+    assert all(torch.equal(x.object_classes[0], window["object_classes"]) for x in live)
+    assert torch.equal(torch.cat([x.held for x in live]), window["held"])

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from mor.lnet.evaluate import NOMINAL_2D, Calibration, Predictions, fit_calibration, metrics
+from mor.lnet.calibration import Calibration
+from mor.lnet.evaluate import NOMINAL_2D, Predictions, fit_calibration, metrics
 from mor.lnet.frames import ego_to_world, world_to_ego
 from mor.lnet.loss import lnet_loss, previous_actions
 from mor.lnet.model import LNet, ObjectAttention

@@ -11,7 +11,8 @@ import torch
 from mor.data.manifest import manifest_version, read_manifest
 from mor.lnet.evaluate import fit_calibration, metrics, predict
 from mor.lnet.params import LNetConfig, TrainParams
-from mor.lnet.train import BEST, CHECKPOINT, LOG, CheckpointMismatch, load_model, signature, train
+from mor.lnet.checkpoint import CheckpointMismatch, load_model, signature
+from mor.lnet.train import BEST, CHECKPOINT, LOG, train
 
 CONFIG = LNetConfig(feature_dim=32, mlp_hidden=32, lstm_hidden=32)
 PARAMS = TrainParams(window=8, stride=8, batch_size=4, max_steps=4, eval_every=2, validation_windows=4,

@@ -1,0 +1,49 @@
+"""The calibration of the L-Net's stated uncertainty: three multipliers, fitted on validation (``mor.lnet.evaluate``)
+and stored as ``calibration.json`` beside the checkpoint they belong to."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TypeVar
+
+from mor.errors import MorError
+
+CALIBRATION_FILE = "calibration.json"
+_T = TypeVar("_T")
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Multipliers of the stated standard deviations (agent, objects) and of the heading concentration."""
+
+    agent_scale: float = 1.0
+    object_scale: float = 1.0
+    kappa_scale: float = 1.0
+
+    def apply(self, estimates: _T) -> _T:
+        """A copy of ``estimates`` (any dataclass with ``agent_tril``, ``object_tril`` and ``kappa``) with the
+        Cholesky factors and the concentration scaled."""
+        return replace(estimates, agent_tril=estimates.agent_tril * self.agent_scale,  # type: ignore[type-var]
+                       object_tril=estimates.object_tril * self.object_scale, kappa=estimates.kappa * self.kappa_scale)
+
+
+def read_calibration(path: Path, dataset_version: str | None = None) -> Calibration:
+    """The scales in the JSON file at ``path`` (written by ``mor calibrate-lnet``); one clear error if unusable,
+    or if it records a dataset version other than ``dataset_version`` (the checkpoint's)."""
+    try:
+        values = json.loads(Path(path).read_text())
+        calibration = Calibration(*(float(values[key]) for key in ("agent_scale", "object_scale", "kappa_scale")))
+    except FileNotFoundError:
+        raise MorError(f"{path}: no calibration beside the checkpoint; run mor calibrate-lnet") from None
+    except (ValueError, KeyError, TypeError) as error:
+        raise MorError(f"{path}: not an L-Net calibration ({type(error).__name__}: {error}); run mor calibrate-lnet")\
+            from None
+    fitted_on = values.get("dataset_version")
+    if dataset_version is not None and fitted_on is not None and fitted_on != dataset_version:
+        raise MorError(f"{path}: calibration dataset_version is {fitted_on} but the checkpoint's is {dataset_version}; "
+                       "run mor calibrate-lnet for this checkpoint")
+    if min(calibration.agent_scale, calibration.object_scale, calibration.kappa_scale) <= 0:
+        raise MorError(f"{path}: calibration scales must be positive, got {calibration}; run mor calibrate-lnet")
+    return calibration

@@ -1,0 +1,146 @@
+"""The trained L-Net inside a control loop: ``load_lnet`` (one call) and a batched streaming step over N envs.
+
+    runner = load_lnet(Path("cards/lnet/model.pt"))          # + calibration.json beside it
+    state = runner.initial_state(n_envs)
+    state = runner.reset(state, done)                          # (N,) bool: envs that start a new episode
+    estimates, state = runner.step(obs_images, obs_classes, obs_held, previous_actions, state)
+
+Inputs are the environments' observations (``mor.sim.env``): images (N, H, W, 3) uint8, object_classes (N, n),
+held (N,) with n meaning "nothing held", and the action taken before each frame (-1 at an episode's start); they
+are turned into the network's inputs by ``mor.data.observations.env_to_network``, the conversion the dataset
+windows use. One forward pass for all N environments, without gradients. The estimates are calibrated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from mor.data.observations import env_to_network
+from mor.errors import MorError
+from mor.lnet.calibration import CALIBRATION_FILE, Calibration, read_calibration
+from mor.lnet.checkpoint import load_checkpoint, model_from_checkpoint
+from mor.lnet.model import LNet, PoseEstimate
+from mor.lnet.params import LNetConfig
+from mor.sim.rules import N_ACTIONS
+
+
+class ObservationMismatch(MorError, ValueError):
+    """Observations the loaded model cannot read (wrong image size or dtype, inconsistent batch sizes)."""
+
+
+@dataclass(frozen=True)
+class Estimates:
+    """Calibrated world-frame estimates for N environments with n objects each (float32 numpy arrays).
+
+    agent_mean (N, 2) m; agent_cov (N, 2, 2) m^2; heading (N,) rad, the mean of a von Mises with concentration
+    heading_kappa (N,); object_mean (N, n, 2) m; object_cov (N, n, 2, 2) m^2.
+    """
+
+    agent_mean: np.ndarray
+    agent_cov: np.ndarray
+    heading: np.ndarray
+    heading_kappa: np.ndarray
+    object_mean: np.ndarray
+    object_cov: np.ndarray
+
+
+@dataclass(frozen=True)
+class StreamState:
+    """The tracker's memory of ``n_envs`` running episodes (opaque to callers)."""
+
+    n_envs: int
+    memory: Any
+
+
+def _covariance(tril: torch.Tensor) -> np.ndarray:
+    return (tril @ tril.transpose(-1, -2)).float().cpu().numpy()
+
+
+class LNetRunner:
+    """A trained L-Net with its calibration, stepped one frame at a time over N environments."""
+
+    def __init__(self, model: LNet, calibration: Calibration, image_size: int, dataset_version: str,
+                 device: torch.device | str = "cpu") -> None:
+        self.model = model.to(device).eval()
+        self.calibration = calibration
+        self.image_size = image_size
+        self.dataset_version = dataset_version
+        self.device = torch.device(device)
+
+    @property
+    def config(self) -> LNetConfig:
+        return self.model.config
+
+    def initial_state(self, n_envs: int) -> StreamState:
+        """The state of ``n_envs`` environments that all start an episode."""
+        if n_envs < 1:
+            raise ValueError(f"n_envs: must be at least 1 (got {n_envs})")
+        return StreamState(n_envs, self.model.initial_state(n_envs, self.device))
+
+    def reset(self, state: StreamState, done: np.ndarray) -> StreamState:
+        """``state`` with the environments where ``done`` (N,) bool is True back at an episode's start."""
+        done = np.asarray(done)
+        if done.shape != (state.n_envs,) or done.dtype != np.bool_:
+            raise ObservationMismatch(f"done: expected ({state.n_envs},) bool, got {done.dtype} {done.shape}")
+        mask = torch.from_numpy(done).to(self.device)
+        return StreamState(state.n_envs, self.model.reset_state(state.memory, mask))
+
+    def _check(self, images: np.ndarray, previous_actions: np.ndarray, n_envs: int) -> None:
+        expected = (n_envs, self.image_size, self.image_size, 3)
+        if not isinstance(images, np.ndarray) or images.dtype != np.uint8 or images.shape != expected:
+            got = f"{images.dtype} {images.shape}" if isinstance(images, np.ndarray) else type(images).__name__
+            raise ObservationMismatch(f"images: expected uint8 frames of shape {expected} (one per environment, "
+                                      f"the model's {self.image_size} px), got {got}")
+        if previous_actions.shape != (n_envs,) or np.any((previous_actions < -1) | (previous_actions >= N_ACTIONS)):
+            raise ObservationMismatch(f"previous_actions: expected ({n_envs},) actions in [-1, {N_ACTIONS - 1}] "
+                                      f"(-1 at an episode's start), got {previous_actions.tolist()}")
+
+    @torch.inference_mode()
+    def step(self, images: np.ndarray, object_classes: np.ndarray, held: np.ndarray, previous_actions: np.ndarray,
+             state: StreamState) -> tuple[Estimates, StreamState]:
+        """One frame of each of N environments -> (calibrated estimates, the next state); one forward pass.
+
+        images (N, H, W, 3) uint8; object_classes (N, n); held (N,) environment convention (n: none);
+        previous_actions (N,) the action taken before this frame, -1 at an episode's start.
+        """
+        previous_actions = np.asarray(previous_actions)
+        self._check(images, previous_actions, state.n_envs)
+        try:
+            inputs = env_to_network(images, object_classes, held)
+        except ValueError as error:
+            raise ObservationMismatch(str(error)) from None
+        device = self.device
+        _, tracked, memory = self.model(
+            inputs.images.to(device)[:, None], inputs.object_classes.to(device), inputs.held.to(device)[:, None],
+            torch.as_tensor(previous_actions, dtype=torch.long, device=device)[:, None], state.memory)
+        return self.estimates(tracked, np.asarray(object_classes).shape[1]), StreamState(state.n_envs, memory)
+
+    def estimates(self, tracked: PoseEstimate, n_objects: int) -> Estimates:
+        """The last frame of the model's world-frame estimate (N, T, ...) for the first ``n_objects`` slots,
+        calibrated, as numpy."""
+        last = self.calibration.apply(PoseEstimate(*(getattr(tracked, name)[:, -1] for name in (
+            "agent_mean", "agent_tril", "heading", "kappa", "object_mean", "object_tril")), frame=tracked.frame))
+        as_numpy = lambda t: t.float().cpu().numpy()  # noqa: E731
+        return Estimates(as_numpy(last.agent_mean), _covariance(last.agent_tril), as_numpy(last.heading),
+                         as_numpy(last.kappa), as_numpy(last.object_mean[:, :n_objects]),
+                         _covariance(last.object_tril[:, :n_objects]))
+
+
+def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str, Any] | None = None,
+              calibrated: bool = True) -> LNetRunner:
+    """The trained L-Net at ``path`` with the calibration stored beside it (``calibration.json``).
+
+    expected: a ``mor.lnet.checkpoint.signature`` (or part of one) the checkpoint must match: another tracker,
+    config, dataset version or image size is one clear error naming both sides. calibrated=False: identity scales
+    (what the calibration stage itself needs).
+    """
+    path = Path(path)
+    saved = load_checkpoint(path, expected or {}, device)
+    version = str(saved["dataset_version"])
+    calibration = read_calibration(path.parent / CALIBRATION_FILE, version) if calibrated else Calibration()
+    return LNetRunner(model_from_checkpoint(saved, device), calibration, int(saved["image_size"]), version, device)

@@ -1,0 +1,132 @@
+"""The streaming API: one-call loading, the batched step equals the sequence model, resets, and bad input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import mor.sim  # noqa: F401 - registers the envs
+from mor.errors import MorError
+from mor.lnet.calibration import CALIBRATION_FILE, Calibration
+from mor.lnet.checkpoint import CheckpointMismatch, signature
+from mor.lnet.model import LNet
+from mor.lnet.params import LNetConfig
+from mor.lnet.runtime import LNetRunner, ObservationMismatch, load_lnet
+
+SMALL = LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)
+SIZE = 16
+
+
+def _runner(calibration: Calibration = Calibration()) -> LNetRunner:
+    torch.manual_seed(0)
+    return LNetRunner(LNet(SMALL), calibration, SIZE, "test")
+
+
+def _rollouts(n_envs: int, steps: int) -> list[dict[str, np.ndarray]]:
+    """Random-action observations of ``n_envs`` envs (with 2 objects), stacked per step."""
+    envs = [gym.make("MOR/Rearrange-v0", image_size=SIZE, n_objects=2) for _ in range(n_envs)]
+    observations = [env.reset(seed=i)[0] for i, env in enumerate(envs)]
+    rng = np.random.default_rng(0)
+    out = []
+    for _ in range(steps):
+        actions = rng.integers(0, 5, n_envs)
+        out.append({"images": np.stack([o["image"] for o in observations]),
+                    "classes": np.stack([o["object_classes"] for o in observations]),
+                    "held": np.array([o["held"] for o in observations]), "actions": actions})
+        observations = [env.step(int(a))[0] for env, a in zip(envs, actions, strict=True)]
+    for env in envs:
+        env.close()
+    return out
+
+
+def _previous(frames: list[dict[str, np.ndarray]], t: int) -> np.ndarray:
+    return frames[t - 1]["actions"] if t > 0 else np.full(len(frames[0]["actions"]), -1)
+
+
+def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration() -> None:
+    calibration = Calibration(agent_scale=2.0, object_scale=0.5, kappa_scale=3.0)
+    runner = _runner(calibration)
+    frames = _rollouts(n_envs=3, steps=5)
+    state = runner.initial_state(3)
+    for t, frame in enumerate(frames):
+        estimates, state = runner.step(frame["images"], frame["classes"], frame["held"], _previous(frames, t), state)
+    from mor.data.observations import env_to_network  # noqa: PLC0415
+
+    inputs = [env_to_network(f["images"], f["classes"], f["held"]) for f in frames]
+    with torch.no_grad():
+        _, tracked, _ = runner.model(torch.stack([i.images for i in inputs], 1), inputs[0].object_classes,
+                                     torch.stack([i.held for i in inputs], 1),
+                                     torch.as_tensor(np.stack([_previous(frames, t) for t in range(5)], 1)))
+    assert estimates.object_mean.shape == (3, 2, 2) and estimates.object_cov.shape == (3, 2, 2, 2)
+    assert estimates.agent_cov.shape == (3, 2, 2) and estimates.heading_kappa.shape == (3,)
+    assert all(v.dtype == np.float32 for v in vars(estimates).values())
+    np.testing.assert_allclose(estimates.agent_mean, tracked.agent_mean[:, -1].numpy(), atol=1e-5)
+    np.testing.assert_allclose(estimates.object_mean, tracked.object_mean[:, -1, :2].numpy(), atol=1e-5)
+    tril = tracked.agent_tril[:, -1]
+    np.testing.assert_allclose(estimates.agent_cov, 4.0 * (tril @ tril.transpose(-1, -2)).numpy(), rtol=1e-4,
+                               atol=1e-6)
+    tril = tracked.object_tril[:, -1, :2]
+    np.testing.assert_allclose(estimates.object_cov, 0.25 * (tril @ tril.transpose(-1, -2)).numpy(), rtol=1e-4,
+                               atol=1e-6)
+    np.testing.assert_allclose(estimates.heading_kappa, 3.0 * tracked.kappa[:, -1].numpy(), rtol=1e-5)
+
+
+def test_reset_restarts_only_the_environments_that_are_done() -> None:
+    runner = _runner()
+    frames = _rollouts(n_envs=2, steps=3)
+    state = runner.initial_state(2)
+    for t, frame in enumerate(frames[:2]):
+        _, state = runner.step(frame["images"], frame["classes"], frame["held"], _previous(frames, t), state)
+    state = runner.reset(state, np.array([True, False]))
+    last = frames[2]
+    after_reset, _ = runner.step(last["images"], last["classes"], last["held"], np.array([-1, -1]), state)
+    fresh, _ = runner.step(last["images"], last["classes"], last["held"], np.array([-1, -1]), runner.initial_state(2))
+    np.testing.assert_allclose(after_reset.agent_mean[0], fresh.agent_mean[0], atol=1e-6)
+    assert not np.allclose(after_reset.agent_mean[1], fresh.agent_mean[1], atol=1e-6)
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    (lambda f: {**f, "images": f["images"].astype(np.float32)}, r"images: expected uint8 frames of shape \(2, 16"),
+    (lambda f: {**f, "images": f["images"][:, :8]}, "the model's 16 px"),
+    (lambda f: {**f, "images": f["images"][:1]}, "one per environment"),
+    (lambda f: {**f, "held": np.array([0, 3])}, r"held: expected \(N,\)"),
+    (lambda f: {**f, "actions": np.array([0, 5])}, "previous_actions"),
+])
+def test_bad_observations_are_one_clear_error(change, message: str) -> None:
+    runner = _runner()
+    frame = change(_rollouts(n_envs=2, steps=1)[0])
+    with pytest.raises(ObservationMismatch, match=message) as error:
+        runner.step(frame["images"], frame["classes"], frame["held"], frame["actions"], runner.initial_state(2))
+    assert "\n" not in str(error.value)
+    with pytest.raises(ObservationMismatch, match="done: expected"):
+        runner.reset(runner.initial_state(2), np.array([True]))
+
+
+def test_the_committed_model_loads_with_one_call_and_checks_what_it_was_made_with(repo_root: Path,
+                                                                                    tmp_path: Path) -> None:
+    committed = repo_root / "cards" / "lnet" / "model.pt"
+    runner = load_lnet(committed)
+    saved = torch.load(committed, weights_only=False)
+    assert runner.image_size == saved["image_size"] and runner.dataset_version == saved["dataset_version"]
+    assert runner.calibration.agent_scale == json.loads((committed.parent / CALIBRATION_FILE).read_text())[
+        "agent_scale"]
+    other = LNetConfig(**saved["config"]).model_copy(update={"lstm_hidden": 8})
+    with pytest.raises(CheckpointMismatch, match="checkpoint config is .*lstm_hidden.* but this run's is"):
+        load_lnet(committed, expected=signature(other, saved["dataset_version"], saved["image_size"]))
+    with pytest.raises(CheckpointMismatch, match="dataset_version is .* but this run's is elsewhere"):
+        load_lnet(committed, expected={"dataset_version": "elsewhere"})
+    alone = tmp_path / "model.pt"
+    shutil.copyfile(committed, alone)
+    with pytest.raises(MorError, match="no calibration beside the checkpoint"):
+        load_lnet(alone)
+    assert load_lnet(alone, calibrated=False).calibration == Calibration()
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({"agent_scale": 1, "object_scale": 1, "kappa_scale": 1,
+                                                         "dataset_version": "elsewhere"}))
+    with pytest.raises(MorError, match="calibration dataset_version is elsewhere but the checkpoint's is"):
+        load_lnet(alone)
