@@ -1,4 +1,10 @@
-"""``mor bench lnet``: inference throughput of the L-Net in the RL loop (PoseNet + one LSTM step per frame)."""
+"""``mor bench lnet``: inference throughput of the L-Net, alone and as the streaming step beside the environments.
+
+Two measurements: the model's single-frame step at several batch sizes on random frames, and the streaming step
+(``LNetRunner.step``, observations converted included) at batch N beside N environments' own rendered steps in
+the same loop and process, each timed separately (frames/s each and their ratio). Weights are random: the cost
+does not depend on them.
+"""
 
 from __future__ import annotations
 
@@ -8,16 +14,24 @@ import statistics
 import time
 from typing import Any
 
+import gymnasium as gym
+import numpy as np
 import torch
 
+from mor.lnet.calibration import Calibration
 from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig
+from mor.lnet.runtime import LNetRunner
+from mor.sim.config import SimConfig
+from mor.sim.rules import N_ACTIONS
+
+STREAMING_ENV = "MOR/Rearrange-v0"
 
 
 @torch.no_grad()
 def benchmark_lnet(config: LNetConfig, image_size: int, batch_sizes: list[int], repeats: int,
                    steps: int = 20) -> dict[str, Any]:
-    """Median frames/s over ``repeats`` runs of ``steps`` single-frame steps (LSTM state carried) per batch size."""
+    """Median frames/s over ``repeats`` runs of ``steps`` single-frame steps (state carried) per batch size."""
     model = LNet(config).eval()
     results = {}
     for batch in batch_sizes:
@@ -37,3 +51,44 @@ def benchmark_lnet(config: LNetConfig, image_size: int, batch_sizes: list[int], 
     return {"benchmark": "lnet", "config": config.model_dump(), "image_size": image_size, "device": "cpu",
             "torch_threads": torch.get_num_threads(), "torch": torch.__version__, "results": results,
             "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}}
+
+
+def benchmark_streaming(config: LNetConfig, sim: SimConfig, n_envs: int, steps: int, repeats: int,
+                        seed: int = 0) -> dict[str, Any]:
+    """The environments' rendered steps and the L-Net's streaming step over the same ``n_envs`` envs (random
+    actions, resets included): median frames/s of each over ``repeats`` runs of ``steps`` vector steps, and
+    ``lnet_over_env`` = L-Net frames/s / environment frames/s (>= 1: the L-Net is not the bottleneck)."""
+    envs = [gym.make(STREAMING_ENV, **sim.model_dump()) for _ in range(n_envs)]
+    runner = LNetRunner(LNet(config), Calibration(), sim.image_size, "benchmark")
+    rng = np.random.default_rng(seed)
+    observations = [env.reset(seed=seed + i)[0] for i, env in enumerate(envs)]
+    state, previous = runner.initial_state(n_envs), np.full(n_envs, -1)
+    env_rates, lnet_rates = [], []
+    for run in range(repeats + 1):  # run 0 warms up
+        env_seconds = lnet_seconds = 0.0
+        for _ in range(steps):
+            start = time.perf_counter()
+            _, state = runner.step(np.stack([o["image"] for o in observations]),
+                                           np.stack([o["object_classes"] for o in observations]),
+                                           np.array([o["held"] for o in observations]), previous, state)
+            lnet_seconds += time.perf_counter() - start
+            actions = rng.integers(0, N_ACTIONS, n_envs)
+            done = np.zeros(n_envs, dtype=bool)
+            start = time.perf_counter()
+            for i, env in enumerate(envs):
+                observations[i], _, terminated, truncated, _ = env.step(int(actions[i]))
+                if terminated or truncated:
+                    observations[i], _ = env.reset()
+                    done[i] = True
+            env_seconds += time.perf_counter() - start
+            state, previous = runner.reset(state, done), np.where(done, -1, actions)
+        if run:
+            env_rates.append(n_envs * steps / env_seconds)
+            lnet_rates.append(n_envs * steps / lnet_seconds)
+    for env in envs:
+        env.close()
+    env_rate, lnet_rate = statistics.median(env_rates), statistics.median(lnet_rates)
+    return {"n_envs": n_envs, "env_id": STREAMING_ENV, "steps_per_run": steps, "repeats": repeats,
+            "env_frames_per_s": env_rate, "lnet_frames_per_s": lnet_rate, "lnet_over_env": lnet_rate / env_rate,
+            "runs_env": env_rates, "runs_lnet": lnet_rates, "torch_threads": torch.get_num_threads(),
+            "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS"), "sim": sim.model_dump()}

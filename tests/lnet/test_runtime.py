@@ -130,3 +130,12 @@ def test_the_committed_model_loads_with_one_call_and_checks_what_it_was_made_wit
                                                          "dataset_version": "elsewhere"}))
     with pytest.raises(MorError, match="calibration dataset_version is elsewhere but the checkpoint's is"):
         load_lnet(alone)
+
+
+def test_streaming_benchmark_times_the_environments_and_the_lnet_in_one_run() -> None:
+    from mor.lnet.bench import benchmark_streaming  # noqa: PLC0415
+    from mor.sim.config import SimConfig  # noqa: PLC0415
+
+    result = benchmark_streaming(SMALL, SimConfig(image_size=SIZE, n_objects=2), n_envs=2, steps=3, repeats=2)
+    assert len(result["runs_env"]) == len(result["runs_lnet"]) == 2
+    assert result["lnet_over_env"] == pytest.approx(result["lnet_frames_per_s"] / result["env_frames_per_s"])
