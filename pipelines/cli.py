@@ -1,46 +1,74 @@
-"""The ``mor`` command line: one subcommand per job, parameters from a params.yaml profile."""
+"""The ``mor`` command line: one subcommand per job, parameters from a params.yaml profile.
+
+Commands live in groups (``app`` at the top, ``sim``, ``bench``); a new group is ``new_group(summary)`` added with
+``app.add_typer(group, name=...)``. Every group turns a MorError from a command, and a usage error (a bad option
+value, an unknown command), into one line on stderr and exit status 2, so commands need no error handling of
+their own: raise ConfigError with a line that names the option and says what to do.
+"""
 
 from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Callable
-from functools import wraps
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any
 
 import typer
+from typer import _click  # typer vendors click: its exceptions and contexts are these, not the `click` package's
+from typer.core import TyperGroup
 
 from mor.config import DEFAULT_PARAMS, load_profile
 from mor.errors import ConfigError, MorError
 from pipelines import paths
 
-app = typer.Typer(help="MOR: Mobile Object Rearrangement toolkit.", no_args_is_help=True, add_completion=False)
-sim_app = typer.Typer(help="The simulator: oracle evaluation, rendered views and videos.", no_args_is_help=True)
-bench_app = typer.Typer(help="Benchmarks that write JSON.", no_args_is_help=True)
+
+@contextmanager
+def _one_line_errors() -> Iterator[None]:
+    """Turn a MorError or a click usage error into ``error: ...`` on stderr and exit status 2."""
+    try:
+        yield
+    except _click.exceptions.NoArgsIsHelpError:
+        raise  # `mor sim` alone prints the group's help
+    except _click.exceptions.UsageError as error:
+        where = error.ctx.command_path if error.ctx is not None else "mor"
+        message = " ".join(error.format_message().split())
+        typer.echo(f"error: {where}: {message} (see {where} --help)", err=True)
+        raise typer.Exit(2) from None
+    except MorError as error:
+        typer.echo(f"error: {error}", err=True)
+        raise typer.Exit(2) from None
+
+
+class _OneLineErrorGroup(TyperGroup):
+    """A typer group whose parsing (``make_context``) and commands (``invoke``) fail in one line."""
+
+    def make_context(self, info_name: str | None, args: list[str], parent: _click.Context | None = None,
+                     **extra: Any) -> _click.Context:
+        with _one_line_errors():
+            return super().make_context(info_name, args, parent, **extra)
+
+    def invoke(self, ctx: _click.Context) -> Any:
+        with _one_line_errors():
+            return super().invoke(ctx)
+
+
+def new_group(summary: str) -> typer.Typer:
+    """A command group of ``mor`` (bad input fails in one line; no arguments prints its help)."""
+    return typer.Typer(cls=_OneLineErrorGroup, help=summary, no_args_is_help=True, add_completion=False)
+
+
+app = new_group("MOR: Mobile Object Rearrangement toolkit.")
+sim_app = new_group("The simulator: oracle evaluation, rendered views and videos.")
+bench_app = new_group("Benchmarks that write JSON.")
 app.add_typer(sim_app, name="sim")
 app.add_typer(bench_app, name="bench")
-
-F = TypeVar("F", bound=Callable[..., Any])
 
 ProfileOption = Annotated[str, typer.Option("--profile", "-p", help="params.yaml profile: tiny, default or paper.")]
 ParamsOption = Annotated[Path, typer.Option("--params", help="The parameters file.")]
 TaskOption = Annotated[str, typer.Option("--task", "-t", help="pick, drop or rearrange.")]
 TASK_NAMES = ("pick", "drop", "rearrange")
-
-
-def one_line_errors(command: F) -> F:
-    """Turn a MorError into one line on stderr and exit status 2."""
-
-    @wraps(command)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return command(*args, **kwargs)
-        except MorError as error:
-            typer.echo(f"error: {error}", err=True)
-            raise typer.Exit(2) from None
-
-    return wrapper  # type: ignore[return-value]
 
 
 def _check_task(task: str) -> str:
@@ -50,7 +78,6 @@ def _check_task(task: str) -> str:
 
 
 @sim_app.command("oracle")
-@one_line_errors
 def sim_oracle(
     task: Annotated[list[str] | None, typer.Option("--task", "-t", help="Task(s): pick, drop, rearrange; repeat.")] = None,
     episodes: Annotated[int | None, typer.Option(help="Episodes per seed (default: the profile's).")] = None,
@@ -73,7 +100,6 @@ def sim_oracle(
 
 
 @sim_app.command("render")
-@one_line_errors
 def sim_render(
     task: TaskOption = "rearrange",
     seed: Annotated[int, typer.Option(help="Episode seed.")] = 0,
@@ -89,7 +115,6 @@ def sim_render(
 
 
 @sim_app.command("video")
-@one_line_errors
 def sim_video(
     task: Annotated[str | None, typer.Option("--task", "-t", help="pick, drop or rearrange (default: the profile's).")] = None,
     policy: Annotated[str | None, typer.Option(help="oracle or random (default: the profile's).")] = None,
@@ -110,7 +135,6 @@ def sim_video(
 
 
 @sim_app.command("demo")
-@one_line_errors
 def sim_demo(
     out_dir: Annotated[Path, typer.Option(help="Folder for the PNGs and the MP4.")] = Path("datasets/demo"),
     profile: ProfileOption = "default",
@@ -128,7 +152,6 @@ def sim_demo(
 
 
 @app.command("collect")
-@one_line_errors
 def collect_command(
     episodes: Annotated[int | None, typer.Option(help="Episodes in the collection (default: the profile's).")] = None,
     workers: Annotated[int | None, typer.Option(help="Worker processes or Ray tasks at once.")] = None,
@@ -151,7 +174,6 @@ def collect_command(
 
 
 @app.command("build-dataset")
-@one_line_errors
 def build_dataset_command(
     workers: Annotated[int | None, typer.Option(help="Worker processes (default: the profile's).")] = None,
     profile: ProfileOption = "default",
@@ -166,12 +188,12 @@ def build_dataset_command(
 
 
 @app.command("validate")
-@one_line_errors
-def validate_command() -> None:
-    """Check every episode file and split against the manifest; exit 1 if anything is wrong."""
+def validate_command(profile: ProfileOption = "default", params: ParamsOption = DEFAULT_PARAMS) -> None:
+    """Decode every episode file, check it and every split against the manifest and the profile; exit 1 if
+    anything is wrong."""
     from pipelines import validate
 
-    report = validate.run()
+    report = validate.run(load_profile(profile, params))
     for problem in report.problems:
         typer.echo(problem, err=True)
     typer.echo(f"checked {report.episodes_checked} episodes: {len(report.rejected)} rejected; "
@@ -181,7 +203,6 @@ def validate_command() -> None:
 
 
 @app.command("import-real")
-@one_line_errors
 def import_real_command(
     bag: Annotated[Path, typer.Argument(help="A ROS 2 rosbag2 recording: an .mcap file or its folder.")],
     object_classes: Annotated[str, typer.Option(help="Class id of each object, comma-separated (e.g. 0,7,13).")],
@@ -220,7 +241,6 @@ def import_real_command(
 
 
 @app.command("train-lnet")
-@one_line_errors
 def train_lnet_command(profile: ProfileOption = "default", params: ParamsOption = DEFAULT_PARAMS) -> None:
     """Train the L-Net on the train split (early stopping on validation); resumes from its last checkpoint."""
     from pipelines import train_lnet
@@ -231,7 +251,6 @@ def train_lnet_command(profile: ProfileOption = "default", params: ParamsOption 
 
 
 @app.command("calibrate-lnet")
-@one_line_errors
 def calibrate_lnet_command(profile: ProfileOption = "default", params: ParamsOption = DEFAULT_PARAMS) -> None:
     """Fit the uncertainty scales of the trained L-Net on the validation split."""
     from pipelines import calibrate_lnet
@@ -242,7 +261,6 @@ def calibrate_lnet_command(profile: ProfileOption = "default", params: ParamsOpt
 
 
 @app.command("eval-lnet")
-@one_line_errors
 def eval_lnet_command(profile: ProfileOption = "default", params: ParamsOption = DEFAULT_PARAMS) -> None:
     """Evaluate the L-Net on the test split before and after calibration; write figures and the model card."""
     from pipelines import eval_lnet
@@ -258,7 +276,6 @@ def eval_lnet_command(profile: ProfileOption = "default", params: ParamsOption =
 
 
 @app.command("ablate-lnet")
-@one_line_errors
 def ablate_lnet_command(
     study: Annotated[str, typer.Option(help="Which variants: actions (previous action as LSTM input or not) or "
                                             "object_head (global MLP or class attention).")] = "actions",
@@ -281,7 +298,6 @@ def ablate_lnet_command(
 
 
 @bench_app.command("sim")
-@one_line_errors
 def bench_sim(
     task: Annotated[list[str] | None, typer.Option("--task", "-t", help="Task(s) to time; repeat.")] = None,
     steps: Annotated[int, typer.Option(help="Steps per run.")] = 5000,
@@ -305,7 +321,6 @@ def bench_sim(
 
 
 @bench_app.command("collect")
-@one_line_errors
 def bench_collect(
     episodes: Annotated[int, typer.Option(help="Episodes per run. Worker start-up (about 2 s) is in the wall "
                                          "clock, so short runs understate the rate of a long collection.")] = 200,
@@ -332,21 +347,30 @@ def bench_collect(
 
 
 @bench_app.command("lnet")
-@one_line_errors
 def bench_lnet(
-    repeats: Annotated[int, typer.Option(help="Timed runs per batch size; the median is reported.")] = 5,
+    repeats: Annotated[int, typer.Option(min=1, help="Timed runs per measurement; the median is reported.")] = 5,
+    n_envs: Annotated[int, typer.Option(min=1, help="Environments of the streaming measurement.")] = 8,
+    steps: Annotated[int, typer.Option(min=1, help="Vector steps per streaming run.")] = 50,
     out: Annotated[Path, typer.Option(help="JSON to write.")] = Path("datasets/bench/lnet.json"),
     profile: ProfileOption = "default",
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
-    """L-Net inference frames/s (PoseNet + one LSTM step) at batch 1 and 64 on the CPU."""
-    from mor.lnet.bench import benchmark_lnet
+    """L-Net inference frames/s at batch 1 and 64, and its streaming step beside the environments' own rendered
+    steps at batch --n-envs in the same run (one torch thread, one render thread)."""
+    os.environ.setdefault("LP_NUM_THREADS", "1")  # one llvmpipe render thread, as in mor bench sim
+    import torch
+
+    from mor.lnet.bench import benchmark_lnet, benchmark_streaming
     from pipelines.io import write_json
 
+    torch.set_num_threads(1)
     config = load_profile(profile, params)
     result = benchmark_lnet(config.lnet.model, config.sim.image_size, [1, 64], repeats)
     for name, entry in result["results"].items():
         typer.echo(f"{name}: {entry['frames_per_s']:.0f} frames/s")
+    streaming = result["streaming"] = benchmark_streaming(config.lnet.model, config.sim, n_envs, steps, repeats)
+    typer.echo(f"streaming at batch {n_envs}: L-Net {streaming['lnet_frames_per_s']:.0f} frames/s, environments "
+               f"{streaming['env_frames_per_s']:.0f} frames/s, ratio {streaming['lnet_over_env']:.2f}")
     typer.echo(f"wrote {write_json(out, result)}")
 
 

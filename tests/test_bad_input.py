@@ -9,7 +9,7 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from mor.cli import app
+from pipelines.cli import app
 from mor.config import load_profile
 from mor.errors import ConfigError
 from mor.sim.tasks import PickEnv

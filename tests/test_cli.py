@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 from typer.testing import CliRunner
 
-from mor.cli import app
+from pipelines.cli import app
 
 TASKS = ("pick", "drop", "rearrange")
 

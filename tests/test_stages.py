@@ -11,7 +11,7 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from mor.cli import app
+from pipelines.cli import app
 
 
 @pytest.fixture

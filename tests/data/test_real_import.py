@@ -418,7 +418,7 @@ def test_invalid_parameters_are_one_line_config_errors() -> None:
 def test_cli_imports_a_bag_and_names_a_missing_topic(string_bag: Path, tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
-    from mor.cli import app
+    from pipelines.cli import app
 
     out = tmp_path / "real"
     args = ["import-real", str(string_bag), "--object-classes", "0,7,13", "--targets", "1,1;-1,2;0,-1.5",

@@ -1,0 +1,41 @@
+"""The layering of docs/design.md: data flows sim -> data -> lnet -> policy -> eval, and nothing in ``mor/``
+imports ``pipelines/`` (the wiring, the command line included, sits above the library)."""
+
+from __future__ import annotations
+
+import ast
+
+import pytest
+from repo_imports import direct_imports, imports_of_tree, repo_modules
+
+#: The library's layers, lowest first; a module may import only its own layer and lower ones.
+LAYERS: tuple[str, ...] = ("sim", "data", "lnet", "policy", "eval")
+
+
+def _layer(module: str) -> int | None:
+    parts = module.split(".")
+    return LAYERS.index(parts[1]) if parts[0] == "mor" and len(parts) > 1 and parts[1] in LAYERS else None
+
+
+LIBRARY = sorted(m for m in repo_modules() if m.split(".")[0] == "mor")
+
+
+@pytest.mark.parametrize("module", LIBRARY)
+def test_library_does_not_import_pipelines(module: str) -> None:
+    upward = sorted(m for m in direct_imports(module) if m.split(".")[0] == "pipelines")
+    assert not upward, f"{module} imports {upward}: mor/ must not depend on pipelines/ (move the code down)"
+
+
+@pytest.mark.parametrize("module", [m for m in LIBRARY if _layer(m) is not None])
+def test_no_layer_imports_a_higher_one(module: str) -> None:
+    own = _layer(module)
+    higher = sorted(m for m in direct_imports(module) if (_layer(m) is not None and _layer(m) > own))
+    assert not higher, f"{module} (layer {LAYERS[own]}) imports higher layers: {higher}"
+
+
+def test_the_rule_catches_a_pipelines_import() -> None:
+    """The import reader sees lazy, aliased and relative imports, so the tests above can fail."""
+    code = "def f():\n    from pipelines import paths\n    import pipelines.io as io\n"
+    assert imports_of_tree(ast.parse(code), "mor.sim.env") >= {"pipelines", "pipelines.paths", "pipelines.io"}
+    relative = imports_of_tree(ast.parse("from ..data import collect\n"), "mor.sim.env")
+    assert "mor.data.collect" in relative
