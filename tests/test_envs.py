@@ -9,10 +9,12 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.error import ResetNeeded
 from gymnasium.utils.env_checker import check_env
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from mor.errors import ConfigError
 from mor.sim.arena import Arena
 from mor.sim.catalog import N_CLASSES, OBJECT_RADIUS, WALL_POOLS
 from mor.sim.episode import OBJECT_SEPARATION, SPAWN_CLEARANCE, TARGET_MIN_DISTANCE, WALL_MARGIN, sample_layout
@@ -200,9 +202,42 @@ def test_numpy_integer_actions_are_accepted(make_env, task) -> None:
 
 def test_step_before_reset_is_refused() -> None:
     env = PickEnv(image_size=16)
-    with pytest.raises(RuntimeError, match="reset"):
+    with pytest.raises(ResetNeeded, match="reset"):
         env.step(0)
     env.close()
+
+
+@pytest.mark.parametrize("task", TASKS)
+@pytest.mark.parametrize("bad", [True, False, np.bool_(True), np.array(False)])
+def test_boolean_actions_are_refused(make_env, task, bad) -> None:
+    env = make_env(task)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="not a bool"):
+        env.unwrapped.step(bad)
+
+
+@pytest.mark.parametrize("ending", ["terminated", "truncated"])
+def test_step_after_the_episode_ended_is_refused(place, make_env, ending) -> None:
+    """Terminated (Pick ends on any pick) or truncated (horizon 1): every further step raises until reset()."""
+    env = make_env("pick", horizon=1 if ending == "truncated" else None)
+    env.reset(seed=0)
+    place(env, (0.0, 0.0, 0.0), [(2.0, 2.0), (-2.0, 2.0), (-2.0, -2.0)])  # nothing within reach
+    _, _, terminated, truncated, _ = env.step(int(Action.PICK if ending == "terminated" else Action.TURN_LEFT))
+    assert (terminated, truncated) == (ending == "terminated", ending == "truncated")
+    for _ in range(2):
+        with pytest.raises(ResetNeeded, match="episode has ended.*reset"):
+            env.unwrapped.step(int(Action.MOVE))
+    env.reset(seed=1)
+    env.step(int(Action.MOVE))
+
+
+@pytest.mark.parametrize("options", [{"n_objects": 7}, {"seed": 3}, ["n_objects"], "fast", 7])
+def test_reset_refuses_unknown_options(make_env, options) -> None:
+    env = make_env("rearrange")
+    with pytest.raises(ConfigError, match=r"reset\(options=...\)") as error:
+        env.reset(seed=0, options=options)
+    assert "\n" not in str(error.value)
+    env.reset(seed=0, options={})  # empty options, like None, are fine
 
 
 # ---- determinism -----------------------------------------------------------------------------------------------

@@ -20,6 +20,7 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import ResetNeeded
 
 from mor.errors import ConfigError
 from mor.sim.arena import Arena
@@ -30,6 +31,21 @@ from mor.sim.rules import N_ACTIONS, Action, Events, MotionNoise, WorldState, ap
 from mor.sim.scene import Scene
 
 Observation = dict[str, np.ndarray | int]
+#: The keys ``reset(options=...)`` accepts (none yet: the layout comes from the seed and the env's parameters).
+RESET_OPTIONS: frozenset[str] = frozenset()
+
+
+def _check_reset_options(options: Any) -> None:
+    """Raise ConfigError unless ``options`` is None or a dict of keys in ``RESET_OPTIONS``."""
+    if options is None:
+        return
+    if not isinstance(options, dict):
+        raise ConfigError(f"reset(options=...): expected a dict or None, got {type(options).__name__}")
+    unknown = sorted(map(str, set(options) - RESET_OPTIONS))
+    if unknown:
+        accepted = ", ".join(sorted(RESET_OPTIONS)) or "none"
+        raise ConfigError(f"reset(options=...): unknown option(s) {', '.join(unknown)}; accepted: {accepted} "
+                          "(scene parameters such as n_objects are set when the env is made)")
 
 
 @dataclass(frozen=True)
@@ -75,6 +91,7 @@ class MOREnv(gym.Env[Observation, int]):
         self.layout: EpisodeLayout | None = None
         self.state: WorldState | None = None
         self.steps = 0
+        self._ended = False
 
     # ---- what each task defines ------------------------------------------------------------------------------
     def _goal_spaces(self, n: int, half_extent: float) -> dict[str, spaces.Space]:
@@ -98,7 +115,11 @@ class MOREnv(gym.Env[Observation, int]):
 
     # ---- the Gymnasium API -----------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Observation, dict]:
+        """options: None or a dict whose keys are in ``RESET_OPTIONS`` (there are none yet); anything else raises
+        ConfigError, so that an option meant for another env is never silently ignored."""
+        _check_reset_options(options)
         super().reset(seed=seed)
+        self._ended = False
         self.layout = sample_layout(self.np_random, self.arena, self.config.n_objects, self.config.texture_pool)
         self.state = WorldState(self.layout.agent_pose.copy(), self.layout.initial_positions.copy())
         self.steps = 0
@@ -112,10 +133,14 @@ class MOREnv(gym.Env[Observation, int]):
 
     def step(self, action: int) -> tuple[Observation, float, bool, bool, dict]:
         if self.state is None:
-            raise RuntimeError("call reset() before step()")
-        if not self.action_space.contains(action):
+            raise ResetNeeded("call reset() before step()")
+        if self._ended:
+            raise ResetNeeded("the episode has ended (terminated or truncated); call reset() before step()")
+        if np.asarray(action).dtype == np.bool_ or not self.action_space.contains(action):
             names = ", ".join(f"{a.value}={a.name}" for a in Action)
-            raise ValueError(f"action {action!r} is outside the action space Discrete({N_ACTIONS}): {names}")
+            raise ValueError(
+                f"action {action!r} is outside the action space Discrete({N_ACTIONS}), an int (not a bool): {names}"
+            )
         chosen = Action(int(action))
         before = self.state.copy()
         self.steps += 1
@@ -128,6 +153,7 @@ class MOREnv(gym.Env[Observation, int]):
         info["masked_action"] = masked
         if outcome.terminated or truncated:
             info["metrics"] = self._metrics(outcome)
+            self._ended = True
         return self._observation(), outcome.reward, outcome.terminated, truncated, info
 
     def action_masks(self) -> np.ndarray:
