@@ -73,9 +73,11 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
         f"![estimates]({figures['strip']})", "", f"Animated: [{figures['gif']}]({figures['gif']})", "",
         f"![learning curve]({figures['learning_curve']})", "",
         "## Use", "",
-        "```python\nfrom pipelines.lnet_io import load_trained, load_calibration\n```", "",
-        "Inputs must match the training data: the image size and the dataset version are checked when the "
-        "checkpoint is loaded.", "",
+        "```python\nfrom mor.lnet.runtime import load_lnet\n\nrunner = load_lnet(Path(\"cards/lnet/model.pt\"))  "
+        "# reads calibration.json beside it\nstate = runner.initial_state(n_envs)\nestimates, state = runner.step("
+        "images, object_classes, held, previous_actions, state)  # env observations, (N, ...)\n```", "",
+        "Frames must have the training data's image size (checked at every step); `load_lnet(path, expected=...)` "
+        "refuses a checkpoint of another config, tracker, dataset version or image size.", "",
         "## Intended use and limits", "",
         "- Trained on random-action episodes of the MOR simulator; its uncertainty is honest only for that data "
         "distribution (check the coverage after calibration before trusting it elsewhere, e.g. on real runs).",
