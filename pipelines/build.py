@@ -7,15 +7,21 @@ from typing import Any
 
 from mor.config import Profile
 from mor.data.lerobot_build import build_splits
-from mor.data.manifest import build_manifest, manifest_version, write_manifest
+from mor.data.manifest import build_manifest, decoded_files, manifest_version, write_manifest
 from mor.timing import timed
 from pipelines import paths
+from pipelines.collect import profile_shape
 from pipelines.io import write_json
 
 
 def run(profile: Profile, workers: int | None = None) -> dict[str, Any]:
     """Manifest of every episode file (simulated and real), the LeRobot splits, the dataset card; writes the
-    counts and each part's wall time (seconds) to ``datasets/build_stats.json``."""
+    counts and each part's wall time (seconds) to ``datasets/build_stats.json``.
+
+    Every new or changed episode file is decoded whole and every file's params are compared with the profile's
+    before anything is written (a bad file stops the build with one line naming it); the manifest is replaced
+    only after the splits are built, so it never lists a file the build could not read.
+    """
     from mor.data.card import write_dataset_card
     from mor.sim.arena import Arena
 
@@ -23,12 +29,13 @@ def run(profile: Profile, workers: int | None = None) -> dict[str, Any]:
     seconds: dict[str, float] = {}
     with timed(seconds, "manifest"):
         files = [path for folder in paths.EPISODE_FOLDERS for path in sorted(folder.glob("*.mcap"))]
-        table = build_manifest(files, paths.DATASETS)
-        write_manifest(table, paths.MANIFEST)
+        table = build_manifest(files, paths.DATASETS, profile_shape(profile), decoded_files(paths.MANIFEST),
+                               progress=True)
         version = manifest_version(table)
     with timed(seconds, "lerobot"):
         counts = build_splits(table.to_pylist(), paths.DATASETS, paths.LEROBOT, version, profile.sim.image_size,
                               profile.collect.fps, workers, profile.build.shard_episodes)
+        write_manifest(table, paths.MANIFEST)
     with timed(seconds, "card"):
         arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
         card = write_dataset_card(paths.MANIFEST, paths.DATASETS, paths.DATASET_CARD,

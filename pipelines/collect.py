@@ -6,10 +6,30 @@ import json
 from pathlib import Path
 from typing import Any
 
-from mor.config import Profile
-from mor.data.collect import CollectionSpec, collect
+from mor.config import PROFILES, Profile, load_profile
+from mor.data.collect import CollectionSpec, ProfileShape, collect
+from mor.errors import ConfigError
 from pipelines import paths
 from pipelines.io import write_json
+
+
+def collection_spec(profile: Profile) -> CollectionSpec:
+    """The collection parameters of ``profile``."""
+    params = profile.collect
+    return CollectionSpec(profile.sim, params.exploration, params.seed, params.episode_steps, params.fps)
+
+
+def profile_shape(profile: Profile) -> ProfileShape:
+    """``profile``'s data-shaping params, named after the params.yaml profile equal to it (for messages), with the
+    other named profiles' (to suggest the one a mismatched file was made with)."""
+    named = {}
+    for name in PROFILES:
+        try:
+            named[name] = load_profile(name)
+        except ConfigError:
+            continue
+    own = next((name for name, other in named.items() if other == profile), "")
+    return ProfileShape(collection_spec(profile), own, tuple((n, collection_spec(p)) for n, p in named.items()))
 
 
 def rejected_files(report: Path | None, out_dir: Path) -> set[str]:
@@ -22,9 +42,11 @@ def rejected_files(report: Path | None, out_dir: Path) -> set[str]:
 
 def run(profile: Profile, out_dir: Path, stats: Path, rejected_from: Path | None, workers: int | None = None,
         backend: str | None = None, episodes: int | None = None) -> dict[str, Any]:
+    """Collect the profile's missing episodes into ``out_dir`` (refusing a folder of another profile's episodes);
+    writes the counts and params to ``stats``."""
     params = profile.collect
-    spec = CollectionSpec(profile.sim, params.exploration, params.seed, params.episode_steps, params.fps)
-    result = collect(spec, out_dir, episodes or params.episodes, workers or params.workers,
-                     backend or params.backend, rejected_files(rejected_from, out_dir))
-    write_json(stats, {**result, "params": spec.params()})
+    shape = profile_shape(profile)
+    result = collect(shape.spec, out_dir, episodes or params.episodes, workers or params.workers,
+                     backend or params.backend, rejected_files(rejected_from, out_dir), shape=shape)
+    write_json(stats, {**result, "params": shape.spec.params()})
     return result

@@ -98,7 +98,7 @@ def legal_world() -> Callable[..., None]:
 
 
 # ---- the tiny dataset shared by the data and L-Net tests ----------------------------------------------------
-from mor.data.collect import CollectionSpec, collect  # noqa: E402
+from mor.data.collect import CollectionSpec, ProfileShape, collect  # noqa: E402
 from mor.data.exploration import ExplorationParams  # noqa: E402
 from mor.data.lerobot_build import build_splits  # noqa: E402
 from mor.data.manifest import build_manifest, manifest_version, write_manifest  # noqa: E402
@@ -132,7 +132,7 @@ def tiny_collection(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def tiny_dataset(tiny_collection: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, list[dict]]:
     """(manifest path, datasets root, manifest rows) for the tiny collection (read-only)."""
     root = tmp_path_factory.mktemp("lerobot")
-    table = build_manifest(sorted(tiny_collection.glob("*.mcap")), tiny_collection)
+    table = build_manifest(sorted(tiny_collection.glob("*.mcap")), tiny_collection, ProfileShape(TINY_SPEC))
     manifest = write_manifest(table, root / "manifest.parquet")
     build_splits(table.to_pylist(), tiny_collection, root, manifest_version(table), 16, 10.0, workers=1,
                  shard_episodes=4, progress=False)

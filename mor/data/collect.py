@@ -6,6 +6,7 @@ Episode ``index`` of a collection with seed ``seed`` is ``sim-<seed>-<index:06d>
 
 from __future__ import annotations
 
+import json
 import multiprocessing as mp
 import os
 import time
@@ -17,8 +18,9 @@ from typing import Any
 import gymnasium as gym
 from tqdm import tqdm
 
-from mor.data.episode_io import EpisodeHeader, EpisodeWriter, encode_png
+from mor.data.episode_io import EpisodeFileError, EpisodeHeader, EpisodeWriter, encode_png, read_metadata
 from mor.data.exploration import ExplorationParams, ExplorationPolicy
+from mor.errors import MorError
 from mor.sim.config import SimConfig
 from mor.sim.rollout import episode_seed
 
@@ -39,6 +41,86 @@ class CollectionSpec:
     def params(self) -> dict[str, Any]:
         return {"sim": self.sim.model_dump(), "exploration": self.exploration.model_dump(), "seed": self.seed,
                 "episode_steps": self.episode_steps, "fps": self.fps, "env_id": ENV_ID}
+
+
+def _json(value: Any) -> Any:
+    """``value`` as it reads back from an episode's JSON params (tuples become lists)."""
+    return json.loads(json.dumps(value, sort_keys=True))
+
+
+def _leaves(params: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested dicts flattened to dotted keys."""
+    out: dict[str, Any] = {}
+    for key, value in params.items():
+        if isinstance(value, dict):
+            out.update(_leaves(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+@dataclass(frozen=True)
+class ProfileShape:
+    """The data-shaping parameters a profile asks of every episode file, and names for one-line messages.
+
+    A simulated episode's data-shaping params are its recorded ``CollectionSpec.params()`` less ``seed`` (the seed
+    only names the files, so collections of several seeds may share a dataset); a real episode's are the image size
+    and frame rate it was resampled to. ``name`` is the profile's name ('' when unknown); ``others`` are
+    (name, spec) of the named profiles, to suggest one that matches a file.
+    """
+
+    spec: CollectionSpec
+    name: str = ""
+    others: tuple[tuple[str, CollectionSpec], ...] = ()
+
+    def data_params(self) -> dict[str, Any]:
+        """What shapes simulated data (JSON-normalised): hashed into the dataset version."""
+        return sim_data_params(self.spec.params())
+
+    def mismatch(self, path: Path, metadata: dict[str, str]) -> str | None:
+        """None if the episode at ``path`` (its ``metadata`` record) was made with this profile's data-shaping
+        params; else one line saying what differs and what to do."""
+        recorded = json.loads(metadata.get("params") or "{}")
+        asked = f"profile '{self.name}'" if self.name else "the active profile"
+        if metadata.get("source") == "sim":
+            got, want = _leaves(sim_data_params(recorded)), _leaves(self.data_params())
+            verb = "collected"
+            match = [name for name, spec in self.others if _leaves(sim_data_params(spec.params())) == got]
+            remedy = f"delete {path.parent} or run with --profile {match[0]}" if match else (
+                f"delete {path.parent} (and re-collect) or run with the parameters it was collected with")
+        else:
+            imported = recorded.get("import", {})
+            got = {"image_size": imported.get("image_size"), "fps": imported.get("fps")}
+            want = {"image_size": self.spec.sim.image_size, "fps": self.spec.fps}
+            verb = "imported"
+            remedy = f"re-import it with --image-size {want['image_size']} --fps {want['fps']:g}, or delete it"
+        differing = sorted(key for key in got.keys() | want.keys() if got.get(key) != want.get(key))
+        if not differing:
+            return None
+        recorded_text = ", ".join(f"{key}={got.get(key, '(absent)')}" for key in differing)
+        asked_text = ", ".join(str(want.get(key, "(absent)")) for key in differing)
+        return f"{path} was {verb} with {recorded_text} but {asked} asks {asked_text}: {remedy}"
+
+
+def sim_data_params(params: dict[str, Any]) -> dict[str, Any]:
+    """The data-shaping part of a simulated episode's params (``CollectionSpec.params()``): all but the seed."""
+    return {key: value for key, value in _json(params).items() if key != "seed"}
+
+
+class ProfileMismatch(MorError):
+    """Episode files made with other data-shaping parameters than the active profile's."""
+
+
+def check_collection(out_dir: Path, shape: ProfileShape) -> None:
+    """Raise ProfileMismatch (one line) if an episode file in ``out_dir`` was collected with other data-shaping
+    params than ``shape``'s. Unreadable files are left to ``mor validate`` (and re-collection)."""
+    for path in sorted(out_dir.glob(f"*{EPISODE_SUFFIX}")):
+        try:
+            problem = shape.mismatch(path, read_metadata(path))
+        except EpisodeFileError:
+            continue
+        if problem:
+            raise ProfileMismatch(problem)
 
 
 def episode_id(seed: int, index: int) -> str:
@@ -152,8 +234,18 @@ def _run_ray(spec: CollectionSpec, out_dir: Path, indices: list[int], workers: i
 
 
 def collect(spec: CollectionSpec, out_dir: Path, episodes: int, workers: int, backend: str = "process",
-            rejected: set[str] = frozenset(), progress: bool = True) -> dict[str, Any]:
-    """Collect every missing episode of ``spec`` into ``out_dir``; returns counts and throughput."""
+            rejected: set[str] = frozenset(), progress: bool = True, shape: ProfileShape | None = None
+            ) -> dict[str, Any]:
+    """Collect every missing episode of ``spec`` into ``out_dir``; returns counts and throughput.
+
+    Refuses (ProfileMismatch, before collecting anything) when ``out_dir`` holds episodes collected with other
+    data-shaping params (``shape``: ``spec``'s, named for the message when given).
+    """
+    shape = shape or ProfileShape(spec)
+    if shape.spec != spec:
+        raise ValueError("shape: must describe the spec being collected")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    check_collection(out_dir, shape)
     indices = pending_indices(out_dir, spec.seed, episodes, rejected)
     runner = {"process": _run_processes, "ray": _run_ray}.get(backend)
     if runner is None:

@@ -23,7 +23,6 @@ from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.timestamp_pb2 import Timestamp
 from mcap.decoder import DecoderFactory
-from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import CompressionType, IndexType, Writer
@@ -214,6 +213,15 @@ class _JsonDecoderFactory(DecoderFactory):
         return json.loads if message_encoding == MessageEncoding.JSON else None
 
 
+REDO = "delete it and re-collect (sim) or re-import (real) it"
+
+
+def _unreadable(path: Path, what: str, error: BaseException) -> EpisodeFileError:
+    """One line naming ``path``, what could not be read and the error (whatever its type), and what to do."""
+    detail = " ".join(f"{type(error).__name__}: {error}".split())
+    return EpisodeFileError(f"{path}: {what} ({detail}); {REDO}")
+
+
 def read_metadata(path: Path) -> dict[str, str]:
     """The ``episode`` metadata record of ``path`` (raises EpisodeFileError when unreadable)."""
     try:
@@ -221,39 +229,84 @@ def read_metadata(path: Path) -> dict[str, str]:
             for record in make_reader(stream).iter_metadata():
                 if record.name == "episode":
                     return dict(record.metadata)
-    except (McapError, OSError, ValueError, EOFError) as error:
-        raise EpisodeFileError(f"{path}: not a readable episode MCAP ({error}); delete it and re-collect") from None
-    raise EpisodeFileError(f"{path}: no 'episode' metadata record; delete it and re-collect")
+    except Exception as error:  # any failure to parse the file's bytes means a bad file
+        raise _unreadable(path, "not a readable episode MCAP", error) from None
+    raise EpisodeFileError(f"{path}: no 'episode' metadata record; {REDO}")
+
+
+def check_summary(path: Path) -> dict[str, str]:
+    """The metadata of ``path`` after checking its summary: indexed, every channel, ``n_frames`` messages on each
+    per-frame channel. Raises EpisodeFileError (one line); reads no message."""
+    metadata = read_metadata(path)
+    try:
+        with open(path, "rb") as stream:
+            summary = make_reader(stream).get_summary()
+        if summary is None or summary.statistics is None or not summary.chunk_indexes:
+            raise EpisodeFileError(f"{path}: no summary or chunk index (truncated?); {REDO}")
+        counts = {summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()}
+        frames = int(metadata["n_frames"])
+    except EpisodeFileError:
+        raise
+    except Exception as error:  # any failure to parse the file's bytes means a bad file
+        raise _unreadable(path, "unreadable summary", error) from None
+    missing = [topic for topic in schema.ALL_TOPICS if topic not in counts]
+    if missing:
+        raise EpisodeFileError(f"{path}: missing channels {', '.join(missing)}; {REDO}")
+    uneven = {t: counts[t] for t in schema.PER_FRAME_TOPICS if counts[t] != frames}
+    if uneven:
+        raise EpisodeFileError(f"{path}: frame counts disagree (metadata {frames}, channels {uneven}); {REDO}")
+    return metadata
+
+
+def verify_episode(path: Path) -> dict[str, str]:
+    """Check that ``path`` is a whole episode: its summary (``check_summary``), every chunk's CRC, and every
+    message decoded (images included). Returns its metadata; raises EpisodeFileError (one line naming the file)."""
+    metadata = check_summary(path)
+    read_episode(path)
+    return metadata
 
 
 def read_episode(path: Path, with_images: bool = True) -> EpisodeData:
-    """Read a whole episode; ``with_images=False`` skips decoding the PNGs (images is then empty)."""
+    """Read a whole episode, checking chunk CRCs; ``with_images=False`` skips decoding the PNGs (images is then
+    empty). Any failure to decode a message (whatever the exception) is an EpisodeFileError naming the file."""
     path = Path(path)
     metadata = read_metadata(path)
+    try:
+        return _decode_episode(path, metadata, with_images)
+    except EpisodeFileError:
+        raise
+    except Exception as error:  # protobuf, zstd, PNG, JSON, shapes: any failure to decode means a bad file
+        raise _unreadable(path, "unreadable messages", error) from None
+
+
+def _decode_episode(path: Path, metadata: dict[str, str], with_images: bool) -> EpisodeData:
     topics = [t for t in schema.ALL_TOPICS if with_images or t != schema.TOPIC_IMAGE]
     images, poses, objects, held, actions = [], [], [], [], []
     episode: dict[str, Any] = {}
-    try:
-        with open(path, "rb") as stream:
-            reader = make_reader(stream, decoder_factories=[ProtobufDecoderFactory(), _JsonDecoderFactory()])
-            for _, channel, _, message in reader.iter_decoded_messages(topics=topics):
-                topic = channel.topic
-                if topic == schema.TOPIC_IMAGE:
-                    images.append(decode_png(message.data))
-                elif topic == schema.TOPIC_AGENT_POSE:
-                    q = message.pose.orientation
-                    poses.append((message.pose.position.x, message.pose.position.y,
-                                  2.0 * np.arctan2(q.z, q.w)))
-                elif topic == schema.TOPIC_OBJECT_POSES:
-                    objects.append([(p.position.x, p.position.y) for p in message.poses])
-                elif topic == schema.TOPIC_STATE:
-                    held.append(message["held"])
-                    actions.append(message["action"])
-                elif topic == schema.TOPIC_EPISODE:
-                    episode = message
-    except (McapError, OSError, ValueError, EOFError) as error:
-        raise EpisodeFileError(f"{path}: unreadable messages ({error}); delete it and re-collect") from None
-    n = int(metadata["n_objects"])
+    with open(path, "rb") as stream:
+        reader = make_reader(stream, validate_crcs=True,
+                             decoder_factories=[ProtobufDecoderFactory(), _JsonDecoderFactory()])
+        for _, channel, _, message in reader.iter_decoded_messages(topics=topics):
+            topic = channel.topic
+            if topic == schema.TOPIC_IMAGE:
+                images.append(decode_png(message.data))
+            elif topic == schema.TOPIC_AGENT_POSE:
+                q = message.pose.orientation
+                poses.append((message.pose.position.x, message.pose.position.y,
+                              2.0 * np.arctan2(q.z, q.w)))
+            elif topic == schema.TOPIC_OBJECT_POSES:
+                objects.append([(p.position.x, p.position.y) for p in message.poses])
+            elif topic == schema.TOPIC_STATE:
+                held.append(message["held"])
+                actions.append(message["action"])
+            elif topic == schema.TOPIC_EPISODE:
+                episode = message
+    n, frames = int(metadata["n_objects"]), int(metadata["n_frames"])
+    counts = {"poses": len(poses), "object poses": len(objects), "states": len(held)}
+    if with_images:
+        counts["images"] = len(images)
+    if any(count != frames for count in counts.values()):
+        raise EpisodeFileError(f"{path}: {frames} frames in the metadata but {counts} messages; {REDO}")
     header = EpisodeHeader(
         episode_id=metadata["episode_id"], source=metadata["source"],
         seed=int(metadata["seed"]) if metadata["seed"] else None, fps=float(metadata["fps"]),

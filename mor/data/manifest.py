@@ -1,19 +1,30 @@
 """The manifest (Parquet): one row per episode file, its split, and the dataset version.
 
 Splits are 8:1:1 (train / validation / test) by a hash of the episode id alone, so adding episodes never moves an
-existing one to another split. The dataset version is a hash of every (episode id, file sha256) pair.
+existing one to another split. The dataset version is a hash of every (episode id, file sha256) pair and of the
+profile's data-shaping params (``ProfileShape.data_params``).
+
+A manifest lists only episodes that a build has read whole (every message decoded), and every one made with the
+profile's data-shaping params: ``build_manifest`` checks each file and refuses the lot (one line) when any is bad,
+so the pipeline writes the manifest only after the build has read every episode.
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from tqdm import tqdm
+
 from mor.atomic import atomic_output
-from mor.data.episode_io import read_metadata
+from mor.data.collect import ProfileShape
+from mor.data.episode_io import EpisodeFileError, read_metadata, verify_episode
 from mor.errors import MorError
 
 SPLITS: tuple[str, ...] = ("train", "validation", "test")
@@ -40,29 +51,75 @@ def file_sha256(path: Path) -> str:
         return hashlib.file_digest(stream, "sha256").hexdigest()
 
 
-def dataset_version(episode_ids: list[str], hashes: list[str]) -> str:
-    """A 12-hex-digit content hash of the episodes (order-independent)."""
-    digest = hashlib.sha256()
+def dataset_version(episode_ids: list[str], hashes: list[str], data_params: dict[str, Any]) -> str:
+    """A 12-hex-digit content hash of the episodes (order-independent) and the params that shaped them."""
+    digest = hashlib.sha256(json.dumps(data_params, sort_keys=True).encode() + b"\n")
     for episode, sha in sorted(zip(episode_ids, hashes, strict=True)):
         digest.update(f"{episode} {sha}\n".encode())
     return digest.hexdigest()[:12]
 
 
-def build_manifest(episode_files: list[Path], root: Path) -> pa.Table:
-    """The manifest of ``episode_files`` (paths stored relative to ``root``), sorted by episode id."""
-    rows = []
-    for path in episode_files:
-        metadata = read_metadata(path)
+class EpisodesRejected(MorError):
+    """Episode files a build cannot use (unreadable, or made with other data-shaping params); ``problems`` has
+    one line per file, the message one line for all."""
+
+    def __init__(self, problems: list[str], files: list[Path]) -> None:
+        names = ", ".join(path.name for path in files[:5]) + (", ..." if len(files) > 5 else "")
+        more = f" ({len(files)} bad files: {names})" if len(files) > 1 else ""
+        super().__init__(f"{problems[0]}{more}; the manifest is unchanged")
+        self.problems, self.files = problems, files
+
+
+VERIFIED_KEY = b"episodes_decoded"  # schema metadata of manifests whose every episode was decoded by a build
+
+
+def decoded_files(path: Path) -> dict[str, str]:
+    """{file: sha256} of a manifest at ``path`` written after its build decoded every episode ({} if there is
+    none, it cannot be read, or an older build wrote it without decoding)."""
+    try:
+        table = pq.read_table(path)
+    except (OSError, pa.ArrowException):
+        return {}
+    if (table.schema.metadata or {}).get(VERIFIED_KEY) != b"1":
+        return {}
+    return dict(zip(table["file"].to_pylist(), table["sha256"].to_pylist(), strict=True))
+
+
+def build_manifest(episode_files: list[Path], root: Path, shape: ProfileShape,
+                   decoded: Mapping[str, str] | None = None, progress: bool = False) -> pa.Table:
+    """The manifest of ``episode_files`` (paths stored relative to ``root``), sorted by episode id.
+
+    Every file is decoded whole (``verify_episode``) unless ``decoded`` (``decoded_files`` of the previous
+    manifest) lists it with the same sha256, and its params are compared with ``shape``'s. Raises
+    EpisodesRejected naming the bad files when any is unreadable or made with other data-shaping params.
+    """
+    decoded = decoded or {}
+    rows, problems, bad = [], [], []
+    for path in tqdm(episode_files, desc="manifest", unit="ep", disable=not progress):
+        relative, sha = str(path.relative_to(root)), file_sha256(path)
+        try:
+            metadata = read_metadata(path) if decoded.get(relative) == sha else verify_episode(path)
+        except EpisodeFileError as error:
+            problems.append(str(error))
+            bad.append(path)
+            continue
+        mismatch = shape.mismatch(path, metadata)
+        if mismatch:
+            problems.append(mismatch)
+            bad.append(path)
+            continue
         rows.append({
             "episode_id": metadata["episode_id"], "source": metadata["source"],
             "seed": int(metadata["seed"]) if metadata["seed"] else None,
-            "file": str(path.relative_to(root)), "sha256": file_sha256(path),
+            "file": relative, "sha256": sha,
             "n_frames": int(metadata["n_frames"]), "split": episode_split(metadata["episode_id"]),
         })
+    if problems:
+        raise EpisodesRejected(problems, bad)
     rows.sort(key=lambda row: row["episode_id"])
     table = pa.Table.from_pylist(rows, schema=MANIFEST_SCHEMA)
-    version = dataset_version(table["episode_id"].to_pylist(), table["sha256"].to_pylist())
-    return table.replace_schema_metadata({"dataset_version": version})
+    version = dataset_version(table["episode_id"].to_pylist(), table["sha256"].to_pylist(), shape.data_params())
+    return table.replace_schema_metadata({"dataset_version": version, VERIFIED_KEY: "1"})
 
 
 def manifest_version(table: pa.Table) -> str:

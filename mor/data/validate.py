@@ -1,7 +1,9 @@
 """Validation of the episode files against the manifest, and of each split's LeRobot dataset.
 
 Every problem is one line naming the file; checking goes on after a bad file, and nothing is dropped silently:
-the report lists the rejected files, which ``mor collect --rejected-from`` re-collects.
+the report lists the rejected files, which ``mor collect --rejected-from`` re-collects. Every message of every
+episode is decoded (a file corrupted before its first build is caught), and each episode's params are compared
+with the active profile's data-shaping params.
 """
 
 from __future__ import annotations
@@ -11,11 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mcap.exceptions import McapError
-from mcap.reader import make_reader
 from tqdm import tqdm
 
-from mor.data import schema
+from mor.data.collect import ProfileShape
+from mor.data.episode_io import REDO, EpisodeFileError, verify_episode
 from mor.data.lerobot_build import BUILD_STAMP
 from mor.data.manifest import SPLITS, file_sha256
 
@@ -38,31 +39,23 @@ class ValidationReport:
                 "problems": self.problems, "splits": self.splits}
 
 
-def check_episode_file(path: Path, expected_sha256: str, expected_frames: int) -> str | None:
-    """None if ``path`` is a whole, indexed episode matching the manifest; else what is wrong (one line)."""
+def check_episode_file(path: Path, shape: ProfileShape, expected_sha256: str | None = None,
+                       expected_frames: int | None = None) -> str | None:
+    """None if ``path`` is a whole episode (``verify_episode``: indexed, CRCs, every message decoded) made with
+    ``shape``'s data-shaping params and, where given, with the manifest's frame count and sha256; else what is
+    wrong (one line naming the file)."""
     if not path.is_file():
         return f"{path}: missing; re-collect (mor collect) or re-import (mor import-real) it"
     try:
-        with open(path, "rb") as stream:
-            reader = make_reader(stream)
-            summary = reader.get_summary()
-            if summary is None or summary.statistics is None or not summary.chunk_indexes:
-                return f"{path}: no summary or chunk index (truncated?); re-collect (sim) or re-import (real) it"
-            counts = {summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()}
-            metadata = {m.name: m.metadata for m in reader.iter_metadata()}.get("episode", {})
-    except (McapError, OSError, ValueError, EOFError, KeyError) as error:
-        return f"{path}: unreadable MCAP ({type(error).__name__}: {error}); re-collect (sim) or re-import (real) it"
-    missing = [topic for topic in schema.ALL_TOPICS if topic not in counts]
-    if missing:
-        return f"{path}: missing channels {', '.join(missing)}; re-collect (sim) or re-import (real) it"
-    frames = int(metadata.get("n_frames", -1))
-    uneven = {t: counts[t] for t in schema.PER_FRAME_TOPICS if counts[t] != frames}
-    if frames != expected_frames or uneven:
-        return (f"{path}: frame counts disagree (metadata {frames}, manifest {expected_frames}, channels {uneven}); "
-                "re-collect it")
-    if file_sha256(path) != expected_sha256:
+        metadata = verify_episode(path)
+    except EpisodeFileError as error:
+        return str(error)
+    frames = int(metadata["n_frames"])
+    if expected_frames is not None and frames != expected_frames:
+        return f"{path}: {frames} frames but the manifest says {expected_frames}; {REDO}"
+    if expected_sha256 is not None and file_sha256(path) != expected_sha256:
         return f"{path}: sha256 differs from the manifest (file changed after build); rebuild or re-collect it"
-    return None
+    return shape.mismatch(path, metadata)
 
 
 def check_split(root: Path, split: str, episodes: int, frames: int) -> tuple[dict[str, int], str | None]:
@@ -82,19 +75,22 @@ def check_split(root: Path, split: str, episodes: int, frames: int) -> tuple[dic
 
 
 def validate(manifest: list[dict], episodes_root: Path, episode_folders: tuple[Path, ...], datasets_root: Path,
-             progress: bool = True) -> ValidationReport:
-    """Check every manifest episode (paths relative to ``episodes_root``), that every episode file in
-    ``episode_folders`` is in the manifest, and every split; returns the report (does not raise on bad data)."""
+             shape: ProfileShape, progress: bool = True) -> ValidationReport:
+    """Check every manifest episode (paths relative to ``episodes_root``; each decoded whole and compared with
+    ``shape``), that every episode file in ``episode_folders`` is in the manifest (a bad unlisted file is rejected
+    too), and every split; returns the report (does not raise on bad data)."""
     report = ValidationReport()
-    for row in tqdm(manifest, desc="validate", unit="ep", disable=not progress):
-        problem = check_episode_file(episodes_root / row["file"], row["sha256"], row["n_frames"])
-        report.episodes_checked += 1
+    listed = {row["file"] for row in manifest}
+    unlisted = sorted(p for folder in episode_folders for p in folder.glob("*.mcap")
+                      if str(p.relative_to(episodes_root)) not in listed)
+    checks = [(episodes_root / row["file"], row) for row in manifest] + [(path, None) for path in unlisted]
+    for path, row in tqdm(checks, desc="validate", unit="ep", disable=not progress):
+        problem = check_episode_file(path, shape, *((row["sha256"], row["n_frames"]) if row else ()))
+        report.episodes_checked += row is not None
         if problem:
             report.problems.append(problem)
-            report.rejected.append(row["file"])
-    listed = {row["file"] for row in manifest}
-    for path in sorted(p for folder in episode_folders for p in folder.glob("*.mcap")):
-        if str(path.relative_to(episodes_root)) not in listed:
+            report.rejected.append(str(path.relative_to(episodes_root)))
+        elif row is None:
             report.problems.append(f"{path}: not in the manifest; run mor build-dataset to include it")
     for split in SPLITS:
         rows = [row for row in manifest if row["split"] == split]

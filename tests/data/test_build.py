@@ -9,6 +9,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from mor.data.collect import CollectionSpec, ProfileShape
 from mor.data.episode_io import read_episode
 from mor.data.manifest import (
     SPLITS,
@@ -22,13 +23,15 @@ from mor.data.schema import MAX_OBJECTS
 from mor.errors import MorError
 
 
-def test_manifest_lists_every_episode_with_hash_and_frames(tiny_collection: Path, tiny_dataset: tuple) -> None:
+def test_manifest_lists_every_episode_with_hash_and_frames(tiny_collection: Path, tiny_dataset: tuple,
+                                                           tiny_spec: CollectionSpec) -> None:
     manifest_path, _, rows = tiny_dataset
     table = read_manifest(manifest_path)
     assert table.column_names == ["episode_id", "source", "seed", "file", "sha256", "n_frames", "split"]
     assert len(rows) == len(list(tiny_collection.glob("*.mcap")))
     assert all(row["source"] == "sim" and len(row["sha256"]) == 64 for row in rows)
-    assert manifest_version(table) == dataset_version([r["episode_id"] for r in rows], [r["sha256"] for r in rows])
+    assert manifest_version(table) == dataset_version([r["episode_id"] for r in rows], [r["sha256"] for r in rows],
+                                                      ProfileShape(tiny_spec).data_params())
 
 
 def test_splits_are_8_1_1_and_never_move_when_episodes_are_added() -> None:
@@ -39,9 +42,12 @@ def test_splits_are_8_1_1_and_never_move_when_episodes_are_added() -> None:
     assert [episode_split(i) for i in ids[:100]] == splits[:100]  # a function of the id alone
 
 
-def test_version_changes_with_content_not_order() -> None:
-    assert dataset_version(["a", "b"], ["1", "2"]) == dataset_version(["b", "a"], ["2", "1"])
-    assert dataset_version(["a", "b"], ["1", "2"]) != dataset_version(["a", "b"], ["1", "3"])
+def test_version_changes_with_content_and_data_params_not_order() -> None:
+    params = {"sim": {"image_size": 32}, "episode_steps": 30}
+    assert dataset_version(["a", "b"], ["1", "2"], params) == dataset_version(["b", "a"], ["2", "1"], params)
+    assert dataset_version(["a", "b"], ["1", "2"], params) != dataset_version(["a", "b"], ["1", "3"], params)
+    other = {"sim": {"image_size": 64}, "episode_steps": 30}
+    assert dataset_version(["a", "b"], ["1", "2"], params) != dataset_version(["a", "b"], ["1", "2"], other)
 
 
 def test_missing_manifest_is_one_clear_line(tmp_path: Path) -> None:
@@ -99,11 +105,11 @@ def test_split_statistics_are_in_a_fixed_order(tiny_dataset: tuple) -> None:
         assert features == sorted(features) and "observation.image" in features
 
 
-def test_build_manifest_names_a_corrupt_file(episodes_copy: Path) -> None:
+def test_build_manifest_names_a_corrupt_file(episodes_copy: Path, tiny_spec: CollectionSpec) -> None:
     bad = sorted(episodes_copy.glob("*.mcap"))[0]
     bad.write_bytes(b"not an mcap file")
     with pytest.raises(MorError, match=bad.name):
-        build_manifest(sorted(episodes_copy.glob("*.mcap")), episodes_copy)
+        build_manifest(sorted(episodes_copy.glob("*.mcap")), episodes_copy, ProfileShape(tiny_spec))
 
 
 def test_manifest_parquet_is_plain(tiny_dataset: tuple) -> None:

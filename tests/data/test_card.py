@@ -22,7 +22,7 @@ from mor.data.card_stats import (
     mean_displacement,
     median_mean_displacement,
 )
-from mor.data.collect import CollectionSpec
+from mor.data.collect import CollectionSpec, ProfileShape
 from mor.data.episode_io import EpisodeData, EpisodeHeader
 from mor.data.manifest import build_manifest, manifest_version, write_manifest
 from mor.sim.arena import Arena
@@ -86,7 +86,8 @@ def _front_matter(card: str) -> dict:
 def test_dataset_card_from_a_tiny_collection(tiny_collection: Path, tiny_spec: CollectionSpec,
                                              square_arena: Arena, tmp_path: Path) -> None:
     root, params = tiny_collection, tiny_spec.params()
-    manifest_path = write_manifest(build_manifest(sorted(root.glob("*.mcap")), root), tmp_path / "manifest.parquet")
+    manifest = build_manifest(sorted(root.glob("*.mcap")), root, ProfileShape(tiny_spec))
+    manifest_path = write_manifest(manifest, tmp_path / "manifest.parquet")
     out = tmp_path / "card"
     card_path = write_dataset_card(manifest_path, root, out, params, square_arena, "datasets", progress=False)
     assert card_path == out / CARD_NAME and card_path.is_file()

@@ -5,13 +5,13 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from mor.data.collect import CollectionSpec, collect
+from mor.data.collect import CollectionSpec, ProfileShape, collect
 from mor.data.validate import validate
 
 
-def test_clean_dataset_validates(tiny_dataset: tuple, tiny_collection: Path) -> None:
+def test_clean_dataset_validates(tiny_dataset: tuple, tiny_collection: Path, tiny_spec: CollectionSpec) -> None:
     _, root, rows = tiny_dataset
-    report = validate(rows, tiny_collection, (tiny_collection,), root, progress=False)
+    report = validate(rows, tiny_collection, (tiny_collection,), root, ProfileShape(tiny_spec), progress=False)
     assert report.ok, report.problems
     assert report.episodes_checked == len(rows)
     assert sum(split["episodes"] for split in report.splits.values()) == len(rows)
@@ -26,7 +26,7 @@ def test_truncated_and_corrupt_files_are_named_and_the_rest_checked(
     data = bytearray(corrupt.read_bytes())
     data[len(data) // 2] ^= 0xFF
     corrupt.write_bytes(bytes(data))
-    report = validate(rows, episodes_copy, (episodes_copy,), root, progress=False)
+    report = validate(rows, episodes_copy, (episodes_copy,), root, ProfileShape(tiny_spec), progress=False)
     assert report.rejected == [rows[0]["file"], rows[1]["file"]]
     assert report.episodes_checked == len(rows)
     assert all("\n" not in problem for problem in report.problems)
@@ -35,13 +35,14 @@ def test_truncated_and_corrupt_files_are_named_and_the_rest_checked(
     result = collect(tiny_spec, episodes_copy, tiny_episodes, workers=1, progress=False,
                      rejected=set(report.rejected))
     assert result["collected"] == 2
-    assert validate(rows, episodes_copy, (episodes_copy,), root, progress=False).ok
+    assert validate(rows, episodes_copy, (episodes_copy,), root, ProfileShape(tiny_spec), progress=False).ok
 
 
-def test_split_count_mismatch_is_reported(tiny_dataset: tuple, tiny_collection: Path, tmp_path: Path) -> None:
+def test_split_count_mismatch_is_reported(tiny_dataset: tuple, tiny_collection: Path, tmp_path: Path,
+                                          tiny_spec: CollectionSpec) -> None:
     _, root, rows = tiny_dataset
     copy = Path(shutil.copytree(root, tmp_path / "lerobot"))
     shutil.rmtree(copy / "test")
-    report = validate(rows, tiny_collection, (tiny_collection,), copy, progress=False)
+    report = validate(rows, tiny_collection, (tiny_collection,), copy, ProfileShape(tiny_spec), progress=False)
     assert not report.ok
     assert any("split 'test'" in problem for problem in report.problems)
