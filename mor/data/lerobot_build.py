@@ -29,6 +29,7 @@ from mor.data.episode_io import EpisodeData, read_episode  # noqa: E402
 from mor.data.manifest import SPLITS  # noqa: E402
 from mor.data.observations import pad_classes  # noqa: E402
 from mor.data.schema import MAX_OBJECTS, lerobot_features  # noqa: E402
+from mor.data.visibility import visible_per_frame  # noqa: E402
 
 TASK_TEXT = "rearrange the objects to their targets"
 ROBOT_TYPE = "mor_turtlebot"
@@ -47,6 +48,7 @@ def episode_frames(episode: EpisodeData) -> list[dict[str, np.ndarray | str]]:
     header = episode.header
     classes = pad_classes(header.object_classes)
     targets = _padded(np.asarray(header.target_positions), 0.0, np.float32)
+    visible = visible_per_frame(episode.agent_poses, episode.object_positions, episode.held)
     return [
         {
             "observation.image": episode.images[t],
@@ -55,6 +57,7 @@ def episode_frames(episode: EpisodeData) -> list[dict[str, np.ndarray | str]]:
             "observation.target_positions": targets,
             "state.agent_pose": episode.agent_poses[t].astype(np.float32),
             "state.object_positions": _padded(episode.object_positions[t], 0.0, np.float32),
+            "state.object_visible": _padded(visible[t], 0, np.int64),
             "action": np.array([episode.actions[t]], np.int64),
             "task": TASK_TEXT,
         }

@@ -25,6 +25,7 @@ from tqdm import tqdm
 from mor.atomic import atomic_output
 from mor.data.collect import ProfileShape
 from mor.data.episode_io import EpisodeFileError, read_metadata, verify_episode
+from mor.data.schema import DATASET_LAYOUT
 from mor.errors import MorError
 
 SPLITS: tuple[str, ...] = ("train", "validation", "test")
@@ -52,8 +53,10 @@ def file_sha256(path: Path) -> str:
 
 
 def dataset_version(episode_ids: list[str], hashes: list[str], data_params: dict[str, Any]) -> str:
-    """A 12-hex-digit content hash of the episodes (order-independent) and the params that shaped them."""
-    digest = hashlib.sha256(json.dumps(data_params, sort_keys=True).encode() + b"\n")
+    """A 12-hex-digit content hash of the episodes (order-independent), the params that shaped them and the
+    dataset's layout (``schema.DATASET_LAYOUT``)."""
+    digest = hashlib.sha256(f"layout {DATASET_LAYOUT}\n".encode())
+    digest.update(json.dumps(data_params, sort_keys=True).encode() + b"\n")
     for episode, sha in sorted(zip(episode_ids, hashes, strict=True)):
         digest.update(f"{episode} {sha}\n".encode())
     return digest.hexdigest()[:12]

@@ -20,6 +20,9 @@ from typing import Any
 from mor.sim.rules import Action
 
 SCHEMA_VERSION = "1"
+#: The LeRobot dataset's layout (``lerobot_features``), hashed into the dataset version: bump it when they change.
+#: 2: ``state.object_visible`` added.
+DATASET_LAYOUT = "2"
 BASE_TIME_NS = 1_700_000_000_000_000_000  # a fixed epoch: the same episode gives the same bytes
 WORLD_FRAME, AGENT_FRAME, CAMERA_FRAME = "world", "base_link", "camera"
 NO_ACTION = -1
@@ -59,6 +62,8 @@ def lerobot_features(image_size: int) -> dict[str, dict[str, Any]]:
     """The LeRobot v3.0 features of one frame. Objects are padded to ``MAX_OBJECTS`` slots: an absent slot has
     class -1 and position 0. Positions are flattened (x0, y0, x1, y1, ...). Units: metres and radians, world frame
     (DESIGN.md). ``action`` is the action taken after the frame (-1 on an episode's last frame).
+    ``state.object_visible``: 1 where the object is in view by ``mor.sim.rules.visible`` (``mor.data.visibility``),
+    0 otherwise and in absent slots.
     """
     xy = [f"{axis}{i}" for i in range(MAX_OBJECTS) for axis in ("x", "y")]
     return {
@@ -70,5 +75,7 @@ def lerobot_features(image_size: int) -> dict[str, dict[str, Any]]:
         "observation.target_positions": {"dtype": "float32", "shape": (2 * MAX_OBJECTS,), "names": xy},
         "state.agent_pose": {"dtype": "float32", "shape": (3,), "names": ["x", "y", "theta"]},
         "state.object_positions": {"dtype": "float32", "shape": (2 * MAX_OBJECTS,), "names": xy},
+        "state.object_visible": {"dtype": "int64", "shape": (MAX_OBJECTS,),
+                                 "names": [f"visible{i}" for i in range(MAX_OBJECTS)]},
         "action": {"dtype": "int64", "shape": (1,), "names": None},
     }

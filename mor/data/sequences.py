@@ -17,9 +17,11 @@ from torch.utils.data import Dataset
 from mor.data.episode_io import decode_png
 from mor.data.observations import images_to_tensor
 from mor.data.schema import MAX_OBJECTS
+from mor.errors import ConfigError
 
 _COLUMNS = ("observation.image", "observation.object_classes", "observation.held", "observation.target_positions",
-            "state.agent_pose", "state.object_positions", "action", "episode_index", "frame_index")
+            "state.agent_pose", "state.object_positions", "state.object_visible", "action", "episode_index",
+            "frame_index")
 
 
 class SequenceWindows(Dataset):
@@ -28,7 +30,8 @@ class SequenceWindows(Dataset):
 
     Item (T = window, K = MAX_OBJECTS = 5; metres, radians, world frame; ``mor.data.observations`` conventions):
       images (T, 3, H, W) float32 in [0, 1]; agent_pose (T, 3); object_positions (T, K, 2);
-      held (T,) int64 (-1 none); actions (T,) int64 (taken after each frame, -1 after the last);
+      visible (T, K) bool (in view by ``mor.sim.rules.visible``); held (T,) int64 (-1 none);
+      actions (T,) int64 (taken after each frame, -1 after the last);
       object_classes (K,) int64 (-1 for absent slots); object_mask (K,) bool; target_positions (K, 2);
       episode_index, start_frame: int64 scalars.
     """
@@ -39,6 +42,10 @@ class SequenceWindows(Dataset):
         files = sorted(Path(root).glob("data/*/*.parquet"))
         if not files:
             raise FileNotFoundError(f"{root}: no data/*/*.parquet; build the split with mor build-dataset")
+        missing = sorted(set(_COLUMNS) - set(pq.read_schema(files[0]).names))
+        if missing:
+            raise ConfigError(f"{files[0]}: the dataset lacks {', '.join(missing)} (built by an older version); "
+                              "rebuild it with mor build-dataset")
         self.table = pq.ParquetDataset(files).read(columns=list(_COLUMNS)).combine_chunks()
         first_image = decode_png(pc.struct_field(self.table["observation.image"], "bytes")[0].as_py())
         self.image_size = int(first_image.shape[0])
@@ -47,6 +54,7 @@ class SequenceWindows(Dataset):
             "agent_pose": np.stack(self.table["state.agent_pose"].to_numpy(zero_copy_only=False)).astype(np.float32),
             "object_positions": np.stack(self.table["state.object_positions"].to_numpy(zero_copy_only=False))
             .astype(np.float32).reshape(-1, MAX_OBJECTS, 2),
+            "visible": np.stack(self.table["state.object_visible"].to_numpy(zero_copy_only=False)).astype(bool),
             "held": self.table["observation.held"].to_numpy().astype(np.int64),
             "actions": self.table["action"].to_numpy().astype(np.int64),
         }
@@ -64,6 +72,10 @@ class SequenceWindows(Dataset):
                 lengths.append(end - first)
             else:
                 starts.extend(range(first, end - window + 1, stride))
+        if not starts:
+            longest = int(np.max(np.diff(np.r_[0, boundaries, len(episodes)])))
+            raise ConfigError(f"{root}: the longest episode has {longest} frames, fewer than the window of {window}; "
+                              "lower lnet.train.window or collect longer episodes (collect.episode_steps)")
         self.starts = np.asarray(starts, dtype=np.int64)
         self.lengths = np.asarray(lengths, dtype=np.int64) if window is None else np.full(len(starts), window)
 

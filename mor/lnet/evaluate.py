@@ -18,12 +18,12 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from mor.data.sequences import SequenceWindows
+from mor.data.visibility import visible_per_frame
 from mor.lnet.calibration import Calibration
 from mor.lnet.likelihoods import gaussian_nll, log_i0, mahalanobis_squared, von_mises_nll
 from mor.lnet.model import LNet
 from mor.lnet.train import run_model, to_device
 from mor.sim.geometry import wrap_angle
-from mor.sim.rules import WorldState, visible
 
 SIGMAS = (1, 2, 3)
 NOMINAL_2D = {k: float(1.0 - np.exp(-k * k / 2.0)) for k in SIGMAS}
@@ -59,13 +59,9 @@ class Predictions:
 
 def seen_so_far(agent_pose: np.ndarray, objects: np.ndarray, held: np.ndarray, present: np.ndarray) -> np.ndarray:
     """(T, K) whether each object was visible to the camera (``rules.visible``) or held at or before frame t."""
-    t_max, k_max = objects.shape[:2]
-    now = np.zeros((t_max, k_max), dtype=bool)
     n = int(present.sum())
-    for t in range(t_max):
-        state = WorldState(agent_pose[t].astype(float), objects[t, :n].astype(float), int(held[t]))
-        for i in range(n):
-            now[t, i] = state.held == i or visible(state, i)
+    now = np.zeros(objects.shape[:2], dtype=bool)
+    now[:, :n] = visible_per_frame(agent_pose, objects[:, :n], held) | (held[:, None] == np.arange(n))
     return np.maximum.accumulate(now, axis=0)
 
 

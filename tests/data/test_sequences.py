@@ -46,6 +46,7 @@ def test_environment_observations_and_dataset_windows_give_identical_tensors(
 
     from mor.data.collect import ENV_ID  # noqa: PLC0415
     from mor.data.observations import env_to_network  # noqa: PLC0415
+    from mor.sim import rules  # noqa: PLC0415
 
     _, root, rows = tiny_dataset
     train_rows = [r for r in rows if r["split"] == "train"]
@@ -53,13 +54,18 @@ def test_environment_observations_and_dataset_windows_give_identical_tensors(
     episode = read_episode(tiny_collection / train_rows[int(window["episode_index"])]["file"])
     env = gym.make(ENV_ID, horizon=tiny_spec.episode_steps, **tiny_spec.sim.model_dump())
     observation, _ = env.reset(seed=episode.header.seed)
-    live = []
+    live, visible = [], []
     for action in episode.actions:
         live.append(env_to_network(observation["image"][None], observation["object_classes"][None],
                                    np.array([observation["held"]])))
+        state = env.unwrapped.state
+        visible.append([rules.visible(state, i) for i in range(state.n_objects)])
         if action >= 0:  # -1: the last frame
             observation, *_ = env.step(int(action))
     env.close()
     assert torch.equal(torch.cat([x.images for x in live]), window["images"])
     assert all(torch.equal(x.object_classes[0], window["object_classes"]) for x in live)
     assert torch.equal(torch.cat([x.held for x in live]), window["held"])
+    n = len(visible[0])  # the recorded visibility is the simulator's rule on the live state
+    np.testing.assert_array_equal(window["visible"][:, :n].numpy(), np.array(visible))
+    assert np.array(visible).any() and not window["visible"][:, n:].any()
