@@ -187,6 +187,14 @@ class LNet(nn.Module):
         keep = (~done).to(state[0].dtype)[None, :, None]
         return state[0] * keep, state[1] * keep
 
+    @staticmethod
+    def select_state(
+        state: tuple[torch.Tensor, torch.Tensor], other: tuple[torch.Tensor, torch.Tensor], take_other: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Per episode, ``other``'s state where ``take_other`` (n,) bool is True, else ``state``'s."""
+        mask = take_other[None, :, None]
+        return torch.where(mask, other[0], state[0]), torch.where(mask, other[1], state[1])
+
     def forward(
         self, images: torch.Tensor, classes: torch.Tensor, held: torch.Tensor, previous_actions: torch.Tensor,
         state: tuple[torch.Tensor, torch.Tensor] | None = None,

@@ -90,6 +90,12 @@ class LNetRunner:
         mask = torch.from_numpy(done).to(self.device)
         return StreamState(state.n_envs, self.model.reset_state(state.memory, mask))
 
+    def select(self, state: StreamState, other: StreamState, take_other: np.ndarray) -> StreamState:
+        """Per environment, ``other``'s state where ``take_other`` (N,) bool is True, else ``state``'s (used to
+        keep one environment's episode going while another's ends and restarts within one vector step)."""
+        mask = torch.from_numpy(np.asarray(take_other, dtype=bool)).to(self.device)
+        return StreamState(state.n_envs, self.model.select_state(state.memory, other.memory, mask))
+
     def _check(self, images: np.ndarray, previous_actions: np.ndarray, n_envs: int) -> None:
         expected = (n_envs, self.image_size, self.image_size, 3)
         if not isinstance(images, np.ndarray) or images.dtype != np.uint8 or images.shape != expected:

@@ -6,6 +6,8 @@ Contract (every task):
   step with ``info["masked_action"] = True``.
 - ``observation_space``: a Dict with ``image`` (H, W, 3) uint8, ``object_classes`` (n,) class ids,
   ``held`` (index of the held object, n when none) and the task's own goal keys. Never a ground-truth pose.
+  With ``render_frames=False`` there is no ``image`` key and nothing is rendered (no MuJoCo scene is built):
+  the fast path for policies that read poses, not pixels.
 - ``info`` (what the agent must not see): ``agent_pose`` (3,) [x m, y m, theta rad], ``object_positions`` (n, 2) m
   (the held object at the agent), ``held`` (-1 when none), ``target_positions`` (n, 2) m, ``object_classes`` (n,),
   the step's events (``obstructed``, ``picked``, ``dropped``, ``drop_blocked``, ``masked_action``), and on the
@@ -64,12 +66,16 @@ class MOREnv(gym.Env[Observation, int]):
     default_horizon: ClassVar[int]
     removed_action: ClassVar[Action | None] = None
 
-    def __init__(self, render_mode: str | None = None, horizon: int | None = None, **sim_params: Any) -> None:
-        """sim_params: the fields of ``SimConfig`` (n_objects, image_size, arena, arena_size, texture_pool, landmark)."""
+    def __init__(
+        self, render_mode: str | None = None, horizon: int | None = None, render_frames: bool = True, **sim_params: Any
+    ) -> None:
+        """sim_params: the fields of ``SimConfig`` (n_objects, image_size, arena, arena_size, texture_pool, landmark).
+        render_frames: False leaves ``image`` out of the observation and never builds the MuJoCo scene."""
         self.config: SimConfig = make_sim_config(where=type(self).__name__, **sim_params)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode: {render_mode!r} is not supported; use 'rgb_array' or None")
         self.render_mode = render_mode
+        self.render_frames = bool(render_frames)
         if horizon is not None and int(horizon) < 1:
             raise ConfigError(f"horizon: must be at least 1 step (got {horizon!r})")
         self.horizon = int(horizon) if horizon is not None else self.default_horizon
@@ -81,7 +87,7 @@ class MOREnv(gym.Env[Observation, int]):
         self.action_space = spaces.Discrete(N_ACTIONS)
         self.observation_space = spaces.Dict(
             {
-                "image": spaces.Box(0, 255, (size, size, 3), np.uint8),
+                **({"image": spaces.Box(0, 255, (size, size, 3), np.uint8)} if self.render_frames else {}),
                 "object_classes": spaces.MultiDiscrete(np.full(n, N_CLASSES)),
                 "held": spaces.Discrete(n + 1),
                 **self._goal_spaces(n, half),
@@ -124,11 +130,12 @@ class MOREnv(gym.Env[Observation, int]):
         self.state = WorldState(self.layout.agent_pose.copy(), self.layout.initial_positions.copy())
         self.steps = 0
         self._begin_task()
-        scene = self._ensure_scene()
-        scene.set_episode(
-            self.layout.wall_textures, self.layout.object_classes, self._landmarks() if self.config.landmark else ()
-        )
-        scene.set_state(self.state)
+        if self.render_frames or self.render_mode is not None:
+            scene = self._ensure_scene()
+            scene.set_episode(
+                self.layout.wall_textures, self.layout.object_classes, self._landmarks() if self.config.landmark else ()
+            )
+            scene.set_state(self.state)
         return self._observation(), self._info(Events(action=Action.MOVE))
 
     def step(self, action: int) -> tuple[Observation, float, bool, bool, dict]:
@@ -148,7 +155,8 @@ class MOREnv(gym.Env[Observation, int]):
         events = Events(action=chosen) if masked else apply_action(self.state, chosen, self.arena, self.noise, self.np_random)
         outcome = self._outcome(before, events)
         truncated = not outcome.terminated and self.steps >= self.horizon
-        self._ensure_scene().set_state(self.state)
+        if self._scene is not None:
+            self._scene.set_state(self.state)
         info = self._info(events)
         info["masked_action"] = masked
         if outcome.terminated or truncated:
@@ -194,7 +202,7 @@ class MOREnv(gym.Env[Observation, int]):
         assert self.layout is not None and self.state is not None
         held = self.state.held if self.state.held >= 0 else self.config.n_objects
         return {
-            "image": self._ensure_scene().render_first_person(),
+            **({"image": self._ensure_scene().render_first_person()} if self.render_frames else {}),
             "object_classes": self.layout.object_classes.copy(),
             "held": held,
             **self._goal_observation(),

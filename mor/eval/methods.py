@@ -1,0 +1,70 @@
+"""The methods the protocol can score, by name, and loading a method's trained policies.
+
+A learned method is an observation variant (``mor.policy.observations.VARIANTS``) with its pick, drop and
+decision policies; ``*_nearest_rule`` replaces the learned decision by the nearest-unfixed-object rule;
+``oracle`` and ``random`` are the simulator's scripted policies.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from mor.errors import ConfigError
+from mor.policy.features import TASKS, Task
+from mor.policy.hierarchy import Skill
+from mor.policy.observations import Variant
+from mor.policy.signature import PolicySignature, check_signature
+
+Decision = Literal["learned", "nearest_rule", "scripted"]
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    name: str
+    variant: Variant | None  # None for the scripted policies
+    decision: Decision
+
+
+METHODS: dict[str, MethodSpec] = {spec.name: spec for spec in (
+    MethodSpec("gt_pose", "gt_pose", "learned"),
+    MethodSpec("lnet", "lnet", "learned"),
+    MethodSpec("lnet_no_uncertainty", "lnet_no_uncertainty", "learned"),
+    MethodSpec("gt_pose_nearest_rule", "gt_pose", "nearest_rule"),
+    MethodSpec("lnet_nearest_rule", "lnet", "nearest_rule"),
+    MethodSpec("oracle", None, "scripted"),
+    MethodSpec("random", None, "scripted"),
+)}
+
+
+def method_spec(name: str) -> MethodSpec:
+    """The method called ``name``; a ConfigError listing the known ones otherwise."""
+    if name not in METHODS:
+        raise ConfigError(f"method: unknown method {name!r}; choose one of {', '.join(METHODS)}")
+    return METHODS[name]
+
+
+def policy_dir(root: Path, variant: Variant, task: Task) -> Path:
+    """Where variant ``variant``'s ``task`` policy is trained (``root/variant/task``)."""
+    return root / variant / task
+
+
+@dataclass
+class TrainedPolicies:
+    """A variant's frozen policies: pick and drop skills and (for a learned decision) the decision policy."""
+
+    pick: Skill
+    drop: Skill
+    decision: Skill | None
+
+    @classmethod
+    def load(cls, root: Path, variant: Variant, n_objects: int, arena: str, lnet_version: str | None,
+             with_decision: bool, deterministic: bool = True) -> TrainedPolicies:
+        """Load ``root/variant/{pick,drop,decision}/model.zip``, each checked against its ``meta.json``."""
+        skills: dict[str, Skill | None] = {"decision": None}
+        for task in TASKS if with_decision else ("pick", "drop"):
+            folder = policy_dir(root, variant, task)
+            check_signature(folder / "meta.json", PolicySignature.of(task, variant, n_objects, arena, lnet_version))
+            skills[task] = Skill.load(folder / "model.zip", deterministic)
+        return cls(skills["pick"], skills["drop"], skills["decision"])

@@ -1,0 +1,59 @@
+"""What a policy knows of the world at one step: a Gaussian belief over the agent's and the objects' poses.
+
+Every policy variant reads the same belief. ``gt_pose`` fills it from the simulator's truth (zero covariances,
+zero heading variance), ``lnet`` and ``lnet_no_uncertainty`` from the L-Net's estimates. The observation
+layout built from it is in ``mor.policy.features``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+Float = NDArray[np.float32]
+
+
+@dataclass(frozen=True)
+class PoseBelief:
+    """A belief for N environments with n objects each. World frame, metres and radians, float32.
+
+    agent_mean (N, 2); agent_cov (N, 2, 2) m²; heading (N,) rad; heading_var (N,) rad² (1/κ of the von Mises,
+    0 for the truth); object_mean (N, n, 2) (a held object sits at the agent); object_cov (N, n, 2, 2) m².
+    """
+
+    agent_mean: Float
+    agent_cov: Float
+    heading: Float
+    heading_var: Float
+    object_mean: Float
+    object_cov: Float
+
+    @property
+    def n_envs(self) -> int:
+        return int(self.agent_mean.shape[0])
+
+    @property
+    def n_objects(self) -> int:
+        return int(self.object_mean.shape[1])
+
+    @classmethod
+    def from_truth(cls, agent_poses: NDArray, object_positions: NDArray) -> PoseBelief:
+        """agent_poses (N, 3) [x, y, θ]; object_positions (N, n, 2): a belief with zero uncertainty."""
+        agent = np.asarray(agent_poses, np.float32).reshape(-1, 3)
+        objects = np.asarray(object_positions, np.float32).reshape(agent.shape[0], -1, 2)
+        n_envs, n_objects = objects.shape[:2]
+        return cls(
+            agent_mean=agent[:, :2].copy(),
+            agent_cov=np.zeros((n_envs, 2, 2), np.float32),
+            heading=agent[:, 2].copy(),
+            heading_var=np.zeros(n_envs, np.float32),
+            object_mean=objects.copy(),
+            object_cov=np.zeros((n_envs, n_objects, 2, 2), np.float32),
+        )
+
+    def take(self, index: NDArray | int) -> PoseBelief:
+        """The belief of the environments ``index`` (an int keeps a batch of one)."""
+        index = np.atleast_1d(index)
+        return PoseBelief(*(getattr(self, name)[index] for name in self.__dataclass_fields__))

@@ -1,0 +1,63 @@
+"""Building the environments each policy trains and is evaluated on, from the profile's ``SimConfig``."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import gymnasium as gym
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
+
+from mor.policy.features import Task
+from mor.policy.hierarchy import HierarchicalRearrange, Skill
+from mor.policy.observations import GroundTruthTracker, PoseObservation, Tracker, Variant, has_uncertainty
+from mor.policy.params import PPOParams
+from mor.sim.config import SimConfig
+
+if TYPE_CHECKING:
+    from mor.lnet.runtime import LNetRunner
+
+ENV_IDS: dict[Task, str] = {"pick": "MOR/Pick-v0", "drop": "MOR/Drop-v0", "decision": "MOR/Rearrange-v0"}
+
+
+def make_task_env(task: Task, sim: SimConfig, render_frames: bool, **kwargs: object) -> gym.Env:
+    """The MOR environment of ``task`` (decision: the full task), with or without first-person frames."""
+    return gym.make(ENV_IDS[task], render_frames=render_frames, **sim.model_dump(), **kwargs).unwrapped
+
+
+def make_policy_env(
+    task: Task, sim: SimConfig, tracker: Tracker, uncertainty: bool, skills: tuple[Skill, Skill] | None = None,
+) -> gym.Env:
+    """One environment with the policy's observation vector: a ``PoseObservation`` of Pick/Drop, or, for the
+    decision, the ``HierarchicalRearrange`` semi-MDP over the frozen ``skills`` (pick, drop). Frames are rendered
+    only when the tracker reads them (never for the ground truth)."""
+    render_frames = not isinstance(tracker, GroundTruthTracker)
+    if task == "decision":
+        if skills is None:
+            raise ValueError("the decision policy's environment needs the trained pick and drop skills")
+        return HierarchicalRearrange(make_task_env(task, sim, render_frames), tracker, *skills, uncertainty)
+    return PoseObservation(make_task_env(task, sim, render_frames), tracker, uncertainty)
+
+
+def make_training_env(
+    task: Task, variant: Variant, sim: SimConfig, params: PPOParams, runner: LNetRunner | None = None,
+    skills: tuple[Skill, Skill] | None = None,
+) -> VecEnv:
+    """``params.n_envs`` environments of ``task`` with ``variant``'s observation vector, for SB3.
+
+    gt_pose: ``PoseObservation`` envs without rendering, in one process (dummy) or one each (subproc). L-Net
+    variants: rendered envs in one process; for Pick/Drop ``LNetVecObservation`` runs one batched L-Net forward
+    per vector step, for the decision each env tracks its own belief (decisions last different numbers of steps).
+    """
+    from mor.policy.lnet_tracking import LNetTracker, LNetVecObservation  # noqa: PLC0415 - torch only for L-Net
+
+    uncertainty = has_uncertainty(variant)
+    if variant == "gt_pose":
+        makers = [lambda: make_policy_env(task, sim, GroundTruthTracker(), uncertainty, skills)] * params.n_envs
+        return SubprocVecEnv(makers) if params.vec_env == "subproc" else DummyVecEnv(makers)
+    if runner is None:
+        raise ValueError(f"variant {variant!r} needs the trained L-Net (runner)")
+    if task == "decision":
+        return DummyVecEnv([lambda: make_policy_env(task, sim, LNetTracker(runner), uncertainty, skills)]
+                           * params.n_envs)
+    raw = DummyVecEnv([lambda: make_task_env(task, sim, render_frames=True)] * params.n_envs)
+    return LNetVecObservation(raw, runner, task, sim.n_objects, uncertainty)

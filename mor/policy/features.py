@@ -1,0 +1,115 @@
+"""The one observation layout of every policy variant: a flat float32 vector built from a ``PoseBelief``.
+
+Layout, in order (n objects; "ego" = the agent's frame of the belief's mean pose, x forward, y left; a
+"polar" triple is [distance m, cos bearing, sin bearing] of a point seen from the agent; an "uncertainty"
+triple is [σ_forward m, σ_left m, correlation] of a covariance rotated into the ego frame):
+
+- agent: x, y, cos θ, sin θ                                              4
+- each object: x, y, polar                                               5 n
+- held: one-hot over the n objects and "nothing"                         n + 1
+- goal, by task:
+    pick      one-hot goal object (n), polar of the goal object (3)
+    drop      goal position x, y (2), polar of the goal position (3)
+    decision  each object: target x, y, object-to-target distance, polar of the target   6 n
+- uncertainty (left out when ``uncertainty=False``): the agent's triple and heading σ (4), each object's
+  triple (3 n), and for pick the goal object's triple (3)
+
+The egocentric polar features are computed from the same global belief (they tell the policy nothing new),
+but without them PPO does not learn Pick (docs/assumptions.md, "Policies").
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mor.policy.belief import PoseBelief
+
+Task = Literal["pick", "drop", "decision"]
+TASKS: tuple[Task, ...] = ("pick", "drop", "decision")
+
+
+def feature_names(task: Task, n_objects: int, uncertainty: bool) -> list[str]:
+    """The name of each entry of ``observation_vector``'s output, in order."""
+    polar = ("distance", "cos_bearing", "sin_bearing")
+    names = ["agent_x", "agent_y", "agent_cos", "agent_sin"]
+    for i in range(n_objects):
+        names += [f"object{i}_x", f"object{i}_y", *(f"object{i}_{p}" for p in polar)]
+    names += [f"held_{i}" for i in range(n_objects)] + ["held_none"]
+    if task == "pick":
+        names += [f"goal_is_{i}" for i in range(n_objects)] + [f"goal_{p}" for p in polar]
+    elif task == "drop":
+        names += ["goal_x", "goal_y", *(f"goal_{p}" for p in polar)]
+    else:
+        for i in range(n_objects):
+            names += [f"target{i}_x", f"target{i}_y", f"object{i}_to_target", *(f"target{i}_{p}" for p in polar)]
+    if uncertainty:
+        triple = ("sigma_forward", "sigma_left", "correlation")
+        names += [f"agent_{t}" for t in triple] + ["heading_sigma"]
+        for i in range(n_objects):
+            names += [f"object{i}_{t}" for t in triple]
+        if task == "pick":
+            names += [f"goal_{t}" for t in triple]
+    return names
+
+
+def observation_size(task: Task, n_objects: int, uncertainty: bool) -> int:
+    return len(feature_names(task, n_objects, uncertainty))
+
+
+def _polar(belief: PoseBelief, points: NDArray) -> NDArray:
+    """points (N, ..., 2) world -> (N, ..., 3) [distance, cos bearing, sin bearing] from each agent."""
+    extra = points.ndim - 2
+    agent = belief.agent_mean.reshape(belief.n_envs, *(1,) * extra, 2)
+    theta = belief.heading.reshape(belief.n_envs, *(1,) * extra)
+    delta = points - agent
+    distance = np.linalg.norm(delta, axis=-1)
+    bearing = np.arctan2(delta[..., 1], delta[..., 0]) - theta
+    return np.stack([distance, np.cos(bearing), np.sin(bearing)], -1)
+
+
+def _ego_uncertainty(covariance: NDArray, heading: NDArray) -> NDArray:
+    """covariance (N, ..., 2, 2) world, heading (N,) -> (N, ..., 3) [σ_forward, σ_left, correlation] in ego."""
+    if not covariance.any():  # the ground truth: no rotation needed (a third of a gt_pose step's cost)
+        return np.zeros((*covariance.shape[:-2], 3), np.float32)
+    c, s = np.cos(heading), np.sin(heading)
+    rotation = np.stack([np.stack([c, s], -1), np.stack([-s, c], -1)], -2)  # world -> ego, (N, 2, 2)
+    rotation = rotation.reshape(rotation.shape[0], *(1,) * (covariance.ndim - 3), 2, 2)
+    ego = rotation @ covariance @ np.swapaxes(rotation, -1, -2)
+    sigma = np.sqrt(np.maximum(np.stack([ego[..., 0, 0], ego[..., 1, 1]], -1), 0.0))
+    correlation = ego[..., 0, 1] / np.maximum(sigma[..., 0] * sigma[..., 1], 1e-9)
+    return np.concatenate([sigma, correlation[..., None]], -1)
+
+
+def observation_vector(
+    belief: PoseBelief, held: NDArray, task: Task, goal: NDArray, uncertainty: bool
+) -> NDArray[np.float32]:
+    """The flat observation (N, D) of ``feature_names(task, n, uncertainty)``.
+
+    held (N,) index of the held object, n when none (the env's convention). goal by task: pick (N,) object
+    index; drop (N, 2) target position, m; decision (N, n, 2) every object's target position, m.
+    """
+    n_envs, n = belief.n_envs, belief.n_objects
+    rows = np.arange(n_envs)
+    parts = [belief.agent_mean, np.cos(belief.heading)[:, None], np.sin(belief.heading)[:, None],
+             np.concatenate([belief.object_mean, _polar(belief, belief.object_mean)], -1).reshape(n_envs, -1),
+             np.eye(n + 1, dtype=np.float32)[np.asarray(held, int)]]
+    if task == "pick":
+        index = np.asarray(goal, int).reshape(n_envs)
+        parts += [np.eye(n, dtype=np.float32)[index], _polar(belief, belief.object_mean[rows, index])]
+    elif task == "drop":
+        position = np.asarray(goal, np.float32).reshape(n_envs, 2)
+        parts += [position, _polar(belief, position)]
+    else:
+        targets = np.asarray(goal, np.float32).reshape(n_envs, n, 2)
+        to_target = np.linalg.norm(belief.object_mean - targets, axis=-1)[..., None]
+        parts.append(np.concatenate([targets, to_target, _polar(belief, targets)], -1).reshape(n_envs, -1))
+    if uncertainty:
+        heading_sigma = np.sqrt(np.maximum(belief.heading_var, 0.0))[:, None]
+        objects = _ego_uncertainty(belief.object_cov, belief.heading)
+        parts += [_ego_uncertainty(belief.agent_cov, belief.heading), heading_sigma, objects.reshape(n_envs, -1)]
+        if task == "pick":
+            parts.append(objects[rows, np.asarray(goal, int).reshape(n_envs)])
+    return np.concatenate([np.asarray(p, np.float32).reshape(n_envs, -1) for p in parts], -1)

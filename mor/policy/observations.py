@@ -1,0 +1,94 @@
+"""Gymnasium wrappers that turn a MOR environment's observation into the policy's flat observation vector.
+
+``PoseObservation(env, tracker, uncertainty)`` works for any tracker with batch 1 (any Gymnasium or SB3 user
+can train on it); ``mor.policy.vec_lnet.LNetVecObservation`` is the batched form for the L-Net, one forward per
+vector step. Both build the vector with ``mor.policy.features.observation_vector`` from a ``PoseBelief``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal, Protocol
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from mor.policy.belief import PoseBelief
+from mor.policy.features import Task, observation_size, observation_vector
+from mor.sim.tasks import DropEnv, PickEnv, RearrangeEnv
+
+Variant = Literal["gt_pose", "lnet", "lnet_no_uncertainty"]
+VARIANTS: tuple[Variant, ...] = ("gt_pose", "lnet", "lnet_no_uncertainty")
+
+
+def has_uncertainty(variant: Variant) -> bool:
+    """Whether a variant's observation carries covariances and the heading's spread."""
+    return variant != "lnet_no_uncertainty"
+
+
+def task_of(env: gym.Env) -> Task:
+    """The policy task a MOR environment trains: pick, drop, or (for the full task) decision."""
+    base = env.unwrapped
+    for cls, task in ((PickEnv, "pick"), (DropEnv, "drop"), (RearrangeEnv, "decision")):
+        if isinstance(base, cls):
+            return task
+    raise TypeError(f"{type(base).__name__} is not a MOR task environment (MOR/Pick-v0, Drop-v0, Rearrange-v0)")
+
+
+def task_goal(observation: dict[str, Any], task: Task) -> np.ndarray:
+    """The goal as the paper gives it, from a MOR observation: pick () index, drop (2,), decision (n, 2)."""
+    key = {"pick": "goal_object", "drop": "goal_position", "decision": "target_positions"}[task]
+    return np.asarray(observation[key])
+
+
+def observation_space(task: Task, n_objects: int, uncertainty: bool) -> spaces.Box:
+    return spaces.Box(-np.inf, np.inf, (observation_size(task, n_objects, uncertainty),), np.float32)
+
+
+class Tracker(Protocol):
+    """Keeps one environment's belief: ``start`` at an episode's first observation, ``update`` after each step."""
+
+    def start(self, observation: dict[str, Any], info: dict[str, Any]) -> PoseBelief: ...
+
+    def update(self, observation: dict[str, Any], info: dict[str, Any], action: int) -> PoseBelief: ...
+
+
+class GroundTruthTracker:
+    """The simulator's truth from ``info`` (the paper's "Policy w/ GT poses"): zero uncertainty."""
+
+    def start(self, observation: dict[str, Any], info: dict[str, Any]) -> PoseBelief:
+        return PoseBelief.from_truth(info["agent_pose"], info["object_positions"])
+
+    def update(self, observation: dict[str, Any], info: dict[str, Any], action: int) -> PoseBelief:
+        return self.start(observation, info)
+
+
+class PoseObservation(gym.Wrapper):
+    """A MOR env whose observation is the flat policy vector (``mor.policy.features``) of a tracker's belief.
+
+    observation_space: Box (D,) float32; ``action_masks()`` is the env's. ``info["belief"]`` holds the belief.
+    """
+
+    def __init__(self, env: gym.Env, tracker: Tracker, uncertainty: bool = True) -> None:
+        super().__init__(env)
+        self.task: Task = task_of(env)
+        self.tracker = tracker
+        self.uncertainty = uncertainty
+        self.observation_space = observation_space(self.task, env.unwrapped.config.n_objects, uncertainty)
+
+    def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
+        observation, info = self.env.reset(**kwargs)
+        return self._vector(observation, info, self.tracker.start(observation, info)), info
+
+    def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        belief = self.tracker.update(observation, info, int(action))
+        return self._vector(observation, info, belief), reward, terminated, truncated, info
+
+    def action_masks(self) -> np.ndarray:
+        return self.env.unwrapped.action_masks()
+
+    def _vector(self, observation: dict[str, Any], info: dict[str, Any], belief: PoseBelief) -> np.ndarray:
+        info["belief"] = belief
+        goal = task_goal(observation, self.task)[None]
+        return observation_vector(belief, np.array([observation["held"]]), self.task, goal, self.uncertainty)[0]

@@ -1,0 +1,54 @@
+"""Every hyper-parameter of policy training and evaluation, validated; no torch import, so configs load fast."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from mor.policy.observations import VARIANTS, Variant
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class PPOParams(_Strict):
+    """One policy's PPO run (sb3-contrib MaskablePPO). ``hidden``: the MLP's hidden widths; with the output layer
+    four hidden layers make the paper's five-layer MLP (shared by the actor and the critic's shapes)."""
+
+    steps: int = Field(300_000, ge=1, description="environment steps (decisions, for the decision policy)")
+    n_envs: int = Field(8, ge=1, le=256)
+    vec_env: Literal["dummy", "subproc"] = "dummy"
+    hidden: list[int] = Field(default_factory=lambda: [256, 256, 256, 256], min_length=1)
+    n_steps: int = Field(256, ge=2, description="steps per env per rollout")
+    batch_size: int = Field(512, ge=2)
+    n_epochs: int = Field(10, ge=1)
+    learning_rate: float = Field(3e-4, gt=0)
+    gamma: float = Field(0.99, gt=0, le=1)
+    gae_lambda: float = Field(0.95, gt=0, le=1)
+    clip_range: float = Field(0.2, gt=0)
+    ent_coef: float = Field(0.01, ge=0)
+    vf_coef: float = Field(0.5, ge=0)
+    max_grad_norm: float = Field(0.5, gt=0)
+    checkpoint_every: int = Field(50_000, ge=1, description="steps between resumable checkpoints")
+
+
+class PolicyParams(_Strict):
+    """Phase I (pick, drop) and phase II (decision) training for each observation variant."""
+
+    seed: int = Field(0, ge=0)
+    variants: list[Variant] = Field(default_factory=lambda: list(VARIANTS), min_length=1)
+    pick: PPOParams = Field(default_factory=PPOParams)
+    drop: PPOParams = Field(default_factory=PPOParams)
+    decision: PPOParams = Field(default_factory=lambda: PPOParams(
+        steps=10_000, n_envs=4, n_steps=64, batch_size=64, hidden=[128, 128, 128, 128], checkpoint_every=2_000))
+    skills_deterministic: bool = Field(True, description="frozen skills act by their most likely action")
+
+
+class EvalParams(_Strict):
+    """The evaluation protocol: the same ``episodes`` episode seeds per seed for every method."""
+
+    seeds: list[int] = Field(default_factory=lambda: [0, 1, 2, 3, 4], min_length=1)
+    episodes: int = Field(100, ge=1, le=100_000)
+    bootstrap_resamples: int = Field(10_000, ge=100)

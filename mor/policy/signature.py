@@ -1,0 +1,52 @@
+"""What a trained policy was trained on, stored beside its weights and checked when it is loaded."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict
+
+from mor.atomic import atomic_output
+from mor.errors import ConfigError
+from mor.policy.features import Task, feature_names
+from mor.policy.observations import Variant, has_uncertainty
+
+
+class PolicySignature(BaseModel):
+    """A policy's observation layout and world: a checkpoint loads only where all of these match."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    task: Task
+    variant: Variant
+    n_objects: int
+    arena: str
+    observation: list[str]
+    lnet_version: str | None = None
+
+    @classmethod
+    def of(cls, task: Task, variant: Variant, n_objects: int, arena: str, lnet_version: str | None) -> PolicySignature:
+        names = feature_names(task, n_objects, has_uncertainty(variant))
+        return cls(task=task, variant=variant, n_objects=n_objects, arena=arena, observation=names,
+                   lnet_version=lnet_version if variant != "gt_pose" else None)
+
+
+def write_signature(path: Path, signature: PolicySignature) -> None:
+    with atomic_output(path) as partial:
+        partial.write_text(json.dumps(signature.model_dump(), indent=2) + "\n")
+
+
+def check_signature(path: Path, expected: PolicySignature) -> None:
+    """Raise ConfigError naming both sides when the policy at ``path`` (its meta.json) was trained otherwise."""
+    if not path.is_file():
+        raise ConfigError(f"{path}: no such policy metadata; train the policy first (mor policy train)")
+    found = PolicySignature.model_validate(json.loads(path.read_text()))
+    for field in ("task", "variant", "n_objects", "arena", "lnet_version"):
+        have, want = getattr(found, field), getattr(expected, field)
+        if have != want:
+            raise ConfigError(f"{path}: the policy was trained with {field}={have!r} but this run needs {want!r}; "
+                              "retrain it (mor policy train) or choose matching settings")
+    if found.observation != expected.observation:
+        raise ConfigError(f"{path}: the policy's observation layout ({len(found.observation)} features) differs from "
+                          f"this version's ({len(expected.observation)}); retrain it (mor policy train)")

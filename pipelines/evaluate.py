@@ -1,0 +1,64 @@
+"""Stages ``evaluate`` (one method: per-episode records and its results row) and ``results`` (every row into
+``cards/results/results.json``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from mor.atomic import atomic_output
+from mor.config import Profile
+from mor.eval.methods import TrainedPolicies, method_spec
+from mor.eval.protocol import metric_summaries, run_protocol
+from mor.eval.results import ROW_KEYS, arena_label, merge_rows
+from mor.policy.features import TASKS
+from mor.policy.observations import GroundTruthTracker
+from pipelines import paths
+from pipelines.train_policy import lnet_runner
+
+
+def _write_json(path: Path, payload: Any) -> None:
+    with atomic_output(path) as partial:
+        partial.write_text(json.dumps(payload, indent=2) + "\n")
+
+
+def run(profile: Profile, profile_name: str, method_name: str, progress: bool = True) -> dict[str, Any]:
+    """Evaluate ``method_name`` with the profile's protocol; write its row to ``cards/results/rows/``."""
+    method = method_spec(method_name)
+    sim, protocol = profile.sim, profile.evaluate
+    policies, tracker_factory, train_steps = None, None, None
+    if method.variant is not None:
+        runner = lnet_runner(method.variant)
+        version = runner.dataset_version if runner is not None else None
+        policies = TrainedPolicies.load(paths.POLICY_CARD, method.variant, sim.n_objects, sim.arena, version,
+                                        with_decision=method.decision == "learned",
+                                        deterministic=profile.policy.skills_deterministic)
+        if runner is None:
+            tracker_factory = GroundTruthTracker
+        else:
+            from mor.policy.lnet_tracking import LNetTracker  # noqa: PLC0415
+
+            tracker_factory = lambda: LNetTracker(runner)  # noqa: E731
+        train_steps = {task: json.loads((paths.POLICY_CARD / method.variant / task / "summary.json").read_text())
+                       ["steps"] for task in TASKS if task != "decision" or method.decision == "learned"}
+    records = run_protocol(method, sim, protocol.seeds, protocol.episodes, paths.EVAL / f"{method.name}.jsonl",
+                           policies, tracker_factory, progress)
+    row = {"method": method.name, "encoder": None, "arena": arena_label(sim.arena),
+           "policy_arena": arena_label(sim.arena), "n_objects": sim.n_objects, "seeds": protocol.seeds,
+           "episodes_per_seed": protocol.episodes, "train_steps": train_steps,
+           "metrics": metric_summaries(records, protocol.bootstrap_resamples), "profile": profile_name}
+    _write_json(paths.RESULTS_CARD / "rows" / f"{method.name}.json", row)
+    return row
+
+
+def collect_results(profile_name: str) -> Path:
+    """Merge every row in ``cards/results/rows/`` of this profile into ``cards/results/results.json``."""
+    rows = [json.loads(p.read_text()) for p in sorted((paths.RESULTS_CARD / "rows").glob("*.json"))]
+    path = paths.RESULTS_CARD / "results.json"
+    existing = json.loads(path.read_text()) if path.is_file() else {"profile": profile_name, "rows": []}
+    if existing.get("profile") != profile_name:
+        existing = {"profile": profile_name, "rows": []}
+    merged = merge_rows(existing["rows"], [r for r in rows if r.get("profile") == profile_name])
+    _write_json(path, {"profile": profile_name, "row_keys": list(ROW_KEYS), "rows": merged})
+    return path

@@ -1,0 +1,94 @@
+"""The policy's observation layout, the ground-truth and L-Net pose sources, and their agreement."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from mor.lnet.calibration import Calibration
+from mor.lnet.model import LNet
+from mor.lnet.params import LNetConfig
+from mor.lnet.runtime import LNetRunner
+from mor.policy.belief import PoseBelief
+from mor.policy.envs import make_policy_env, make_task_env
+from mor.policy.features import TASKS, feature_names, observation_vector
+from mor.policy.lnet_tracking import LNetTracker, LNetVecObservation
+from mor.policy.observations import GroundTruthTracker
+from mor.sim.config import SimConfig
+
+SIM = SimConfig(n_objects=2, image_size=16)
+
+
+def _belief(agent=(0.0, 0.0, 0.0), objects=((2.0, 0.0), (0.0, 1.0))) -> PoseBelief:
+    return PoseBelief.from_truth(np.array([agent]), np.array([objects]))
+
+
+@pytest.mark.parametrize("task", TASKS)
+@pytest.mark.parametrize("uncertainty", [True, False])
+def test_the_vector_has_one_entry_per_named_feature(task: str, uncertainty: bool) -> None:
+    goal = {"pick": np.array([1]), "drop": np.array([[1.0, 1.0]]), "decision": np.zeros((1, 2, 2))}[task]
+    vector = observation_vector(_belief(), np.array([2]), task, goal, uncertainty)
+    assert vector.shape == (1, len(feature_names(task, 2, uncertainty)))
+    assert vector.dtype == np.float32
+
+
+def test_egocentric_goal_features_are_distance_and_bearing_in_the_agent_frame() -> None:
+    belief = _belief(agent=(0.0, 0.0, np.pi / 2))  # facing north (+y)
+    vector = observation_vector(belief, np.array([2]), "pick", np.array([1]), uncertainty=False)[0]
+    named = dict(zip(feature_names("pick", 2, False), vector, strict=True))
+    assert named["goal_distance"] == pytest.approx(1.0)  # object 1 at (0, 1): straight ahead
+    assert named["goal_cos_bearing"] == pytest.approx(1.0)
+    assert named["object0_sin_bearing"] == pytest.approx(-1.0, abs=1e-6)  # object 0 at (2, 0): to the right
+
+
+def test_covariances_are_rotated_into_the_agent_frame() -> None:
+    truth = _belief(agent=(0.0, 0.0, np.pi / 2))
+    belief = PoseBelief(truth.agent_mean, np.array([[[4.0, 0.0], [0.0, 1.0]]], np.float32), truth.heading,
+                        np.array([0.25], np.float32), truth.object_mean, np.zeros((1, 2, 2, 2), np.float32))
+    named = dict(zip(feature_names("drop", 2, True),
+                     observation_vector(belief, np.array([2]), "drop", np.array([[1.0, 1.0]]), True)[0], strict=True))
+    assert named["agent_sigma_forward"] == pytest.approx(1.0)  # world y is forward when facing north
+    assert named["agent_sigma_left"] == pytest.approx(2.0)
+    assert named["heading_sigma"] == pytest.approx(0.5)
+
+
+def test_ground_truth_observations_render_nothing_and_carry_zero_uncertainty() -> None:
+    env = make_policy_env("pick", SIM, GroundTruthTracker(), uncertainty=True)
+    vector, info = env.reset(seed=3)
+    assert env.unwrapped._scene is None  # the fast path never builds the MuJoCo scene
+    named = dict(zip(feature_names("pick", 2, True), vector, strict=True))
+    assert named["agent_x"] == pytest.approx(info["agent_pose"][0])
+    assert named["agent_sigma_forward"] == 0.0 and named["goal_sigma_left"] == 0.0
+    env.close()
+
+
+def _runner() -> LNetRunner:
+    torch.manual_seed(0)
+    return LNetRunner(LNet(LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)), Calibration(), 16, "test")
+
+
+def test_the_batched_lnet_wrapper_equals_one_tracker_per_env_across_episode_ends() -> None:
+    """One forward per vector step (two when an episode ends) gives what a per-env tracker gives, terminal
+    observations included."""
+    runner, n_envs, steps = _runner(), 2, 40
+    vec = LNetVecObservation(DummyVecEnv([lambda: make_task_env("pick", SIM, True)] * n_envs), runner, "pick", 2, True)
+    vec.seed(7)
+    singles = [make_policy_env("pick", SIM, LNetTracker(runner), uncertainty=True) for _ in range(n_envs)]
+    batched = vec.reset()
+    single = [env.reset(seed=7 + i)[0] for i, env in enumerate(singles)]
+    rng, ends = np.random.default_rng(0), 0
+    for _ in range(steps):
+        np.testing.assert_allclose(batched, np.stack(single), atol=1e-5)
+        actions = rng.choice([0, 1, 2, 3], n_envs, p=[0.5, 0.2, 0.2, 0.1])
+        batched, _, dones, infos = vec.step(actions)
+        for i, env in enumerate(singles):
+            vector, _, terminated, truncated, _ = env.step(int(actions[i]))
+            assert dones[i] == (terminated or truncated)
+            if dones[i]:
+                ends += 1
+                np.testing.assert_allclose(infos[i]["terminal_observation"], vector, atol=1e-5)
+                vector = env.reset()[0]  # DummyVecEnv resets without a seed: the env's own generator goes on
+            single[i] = vector
+    assert ends > 0, "the test must cross at least one episode end"
