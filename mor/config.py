@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal, TypeVar
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -25,7 +25,7 @@ class OracleParams(_Strict):
     """The scripted oracle's evaluation: ``episodes`` per seed, mean +- std over ``seeds``."""
 
     episodes: int = Field(100, ge=1, le=100_000)
-    seeds: list[int] = Field(default_factory=lambda: [0, 1, 2, 3, 4], min_length=1)
+    seeds: list[Annotated[int, Field(ge=0)]] = Field(default_factory=lambda: [0, 1, 2, 3, 4], min_length=1)
 
 
 class DemoParams(_Strict):
@@ -33,7 +33,7 @@ class DemoParams(_Strict):
 
     task: Literal["pick", "drop", "rearrange"] = "rearrange"
     policy: Literal["oracle", "random"] = "oracle"
-    seed: int = 0
+    seed: int = Field(0, ge=0)
     fps: int = Field(8, ge=1, le=60)
 
 
@@ -67,8 +67,19 @@ class Profile(_Strict):
     lnet: LNetParams = Field(default_factory=LNetParams)
 
 
-def load_profile(name: str, path: Path = DEFAULT_PARAMS) -> Profile:
-    """Profile ``name`` from ``path`` (params.yaml); raises ConfigError naming the file and the field."""
+Model = TypeVar("Model", bound=BaseModel)
+
+
+def validated(model: type[Model], where: str, **values: Any) -> Model:
+    """``model(**values)``; raises ConfigError with one line naming ``where`` and the bad field."""
+    try:
+        return model(**values)
+    except ValidationError as error:
+        raise ConfigError(format_validation_error(error, where)) from None
+
+
+def _read_params(path: Path) -> dict[str, Any]:
+    """The parameters file as a mapping with a ``profiles`` mapping; ConfigError naming the file otherwise."""
     if not path.is_file():
         raise ConfigError(f"{path}: no such parameters file; run from the repository root or pass --params")
     try:
@@ -78,9 +89,35 @@ def load_profile(name: str, path: Path = DEFAULT_PARAMS) -> Profile:
     profiles = document.get("profiles") if isinstance(document, dict) else None
     if not isinstance(profiles, dict):
         raise ConfigError(f"{path}: expected a top-level 'profiles' mapping with {', '.join(PROFILES)}")
-    if name not in profiles:
-        raise ConfigError(f"{path}: profiles.{name}: no such profile; choose one of {', '.join(profiles)}")
+    return document
+
+
+def _profile_name(document: dict[str, Any], name: str | None, path: Path) -> str:
+    """``name`` (an explicit ``--profile``) or else the file's ``profile:``, checked to be one of its profiles."""
+    if name is None:
+        name = document.get("profile")
+        if not isinstance(name, str):
+            raise ConfigError(f"{path}: profile: expected the name of the active profile (e.g. 'profile: default'); "
+                              "set it or pass --profile")
+    if name not in document["profiles"]:
+        raise ConfigError(f"{path}: profiles.{name}: no such profile; choose one of {', '.join(document['profiles'])}")
+    return name
+
+
+def active_profile(name: str | None = None, path: Path = DEFAULT_PARAMS) -> str:
+    """The profile in force: ``name`` when given (an explicit ``--profile``), else ``profile:`` in ``path``.
+
+    ``profile:`` in params.yaml is the one source that both the DVC stages and the ``mor`` commands read.
+    """
+    return _profile_name(_read_params(path), name, path)
+
+
+def load_profile(name: str | None = None, path: Path = DEFAULT_PARAMS) -> Profile:
+    """Profile ``name`` (default: the file's active ``profile:``) from ``path`` (params.yaml); raises ConfigError
+    naming the file and the field."""
+    document = _read_params(path)
+    name = _profile_name(document, name, path)
     try:
-        return Profile.model_validate(profiles[name] or {})
+        return Profile.model_validate(document["profiles"][name] or {})
     except ValidationError as error:
         raise ConfigError(format_validation_error(error, f"{path}: profiles.{name}")) from None

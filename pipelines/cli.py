@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import sys
+import typing
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -19,7 +20,7 @@ import typer
 from typer import _click  # typer vendors click: its exceptions and contexts are these, not the `click` package's
 from typer.core import TyperGroup
 
-from mor.config import DEFAULT_PARAMS, load_profile
+from mor.config import DEFAULT_PARAMS, active_profile, load_profile
 from mor.errors import ConfigError, MorError
 from pipelines import paths
 
@@ -65,25 +66,52 @@ bench_app = new_group("Benchmarks that write JSON.")
 app.add_typer(sim_app, name="sim")
 app.add_typer(bench_app, name="bench")
 
-ProfileOption = Annotated[str, typer.Option("--profile", "-p", help="params.yaml profile: tiny, default or paper.")]
+ProfileOption = Annotated[str | None, typer.Option(
+    "--profile", "-p", help="params.yaml profile: tiny, default or paper (default: `profile:` in params.yaml).")]
 ParamsOption = Annotated[Path, typer.Option("--params", help="The parameters file.")]
 TaskOption = Annotated[str, typer.Option("--task", "-t", help="pick, drop or rearrange.")]
 TASK_NAMES = ("pick", "drop", "rearrange")
 
 
+def _check_choice(option: str, value: str, choices: tuple[str, ...]) -> str:
+    """``value`` if it is one of ``choices``; ConfigError naming ``option`` (e.g. ``--task``) otherwise."""
+    if value not in choices:
+        raise ConfigError(f"{option}: unknown {option.lstrip('-')} {value!r}; choose one of {', '.join(choices)}")
+    return value
+
+
 def _check_task(task: str) -> str:
-    if task not in TASK_NAMES:
-        raise ConfigError(f"--task: unknown task {task!r}; choose one of {', '.join(TASK_NAMES)}")
-    return task
+    return _check_choice("--task", task, TASK_NAMES)
+
+
+def _parse_seeds(text: str) -> list[int]:
+    """``--seeds 0,1,2`` -> [0, 1, 2]; ConfigError unless every item is a non-negative integer."""
+    try:
+        seeds = [int(item) for item in text.split(",")]
+    except ValueError:
+        seeds = []
+    if not seeds or min(seeds) < 0:
+        raise ConfigError(f"--seeds: expected comma-separated non-negative integers such as 0,1,2 (got {text!r})")
+    return seeds
+
+
+@app.command("profile")
+def profile_command(profile: ProfileOption = None, params: ParamsOption = DEFAULT_PARAMS) -> None:
+    """Print the active profile's name and its resolved parameters (defaults filled in) as YAML."""
+    import yaml
+
+    name = active_profile(profile, params)
+    resolved = load_profile(name, params).model_dump(mode="json")
+    typer.echo(yaml.safe_dump({"profile": name, "params": resolved}, sort_keys=False), nl=False)
 
 
 @sim_app.command("oracle")
 def sim_oracle(
     task: Annotated[list[str] | None, typer.Option("--task", "-t", help="Task(s): pick, drop, rearrange; repeat.")] = None,
-    episodes: Annotated[int | None, typer.Option(help="Episodes per seed (default: the profile's).")] = None,
+    episodes: Annotated[int | None, typer.Option(min=1, help="Episodes per seed (default: the profile's).")] = None,
     seeds: Annotated[str | None, typer.Option(help="Comma-separated seeds (default: the profile's).")] = None,
     out: Annotated[Path, typer.Option(help="Metrics JSON to write.")] = Path("datasets/oracle/metrics.json"),
-    profile: ProfileOption = "default",
+    profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
     """Evaluate the ground-truth oracle; print and write mean +- std over seeds of each task's metrics."""
@@ -91,7 +119,7 @@ def sim_oracle(
 
     config = load_profile(profile, params)
     tasks = [_check_task(name) for name in (task or list(TASK_NAMES))]
-    seed_list = [int(s) for s in seeds.split(",")] if seeds else list(config.oracle.seeds)
+    seed_list = _parse_seeds(seeds) if seeds is not None else list(config.oracle.seeds)
     payload = sim_oracle.run(config, tasks, episodes or config.oracle.episodes, seed_list, out)
     for name, result in payload["tasks"].items():
         summary = "  ".join(f"{k} {v['mean']:.3f} ± {v['std']:.3f}" for k, v in result["summary"].items())
@@ -102,9 +130,9 @@ def sim_oracle(
 @sim_app.command("render")
 def sim_render(
     task: TaskOption = "rearrange",
-    seed: Annotated[int, typer.Option(help="Episode seed.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, help="Episode seed.")] = 0,
     out_dir: Annotated[Path, typer.Option(help="Folder for the PNGs.")] = Path("datasets/renders"),
-    profile: ProfileOption = "default",
+    profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
     """Write the first-person image and the top-down view of an episode's first state as PNG."""
@@ -118,26 +146,30 @@ def sim_render(
 def sim_video(
     task: Annotated[str | None, typer.Option("--task", "-t", help="pick, drop or rearrange (default: the profile's).")] = None,
     policy: Annotated[str | None, typer.Option(help="oracle or random (default: the profile's).")] = None,
-    seed: Annotated[int | None, typer.Option(help="Episode seed (default: the profile's).")] = None,
+    seed: Annotated[int | None, typer.Option(min=0, help="Episode seed (default: the profile's).")] = None,
     out: Annotated[Path, typer.Option(help="Video file: .mp4 or .gif.")] = Path("datasets/renders/demo.mp4"),
-    profile: ProfileOption = "default",
+    profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
     """Play one episode and write it with the first-person and top-down views side by side."""
-    from mor.config import DemoParams
+    from mor.config import DemoParams, validated
+    from mor.sim.views import check_video_path
     from pipelines.demo import record_video
 
     config = load_profile(profile, params)
-    overrides = {"task": task and _check_task(task), "policy": policy, "seed": seed}
-    demo = DemoParams(**{**config.demo.model_dump(), **{k: v for k, v in overrides.items() if v is not None}})
-    record = record_video(config.sim, demo, out)
+    policies = typing.get_args(DemoParams.model_fields["policy"].annotation)
+    overrides = {"task": task and _check_task(task), "policy": policy and _check_choice("--policy", policy, policies),
+                 "seed": seed}
+    demo = validated(DemoParams, "sim video", **{**config.demo.model_dump(),
+                                                 **{k: v for k, v in overrides.items() if v is not None}})
+    record = record_video(config.sim, demo, check_video_path(out))
     typer.echo(f"wrote {out} ({record.steps} steps, metrics {record.metrics})")
 
 
 @sim_app.command("demo")
 def sim_demo(
     out_dir: Annotated[Path, typer.Option(help="Folder for the PNGs and the MP4.")] = Path("datasets/demo"),
-    profile: ProfileOption = "default",
+    profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
     """The profile's demo episode: its first views as PNG and the whole episode as MP4."""
@@ -153,20 +185,20 @@ def sim_demo(
 
 @app.command("collect")
 def collect_command(
-    episodes: Annotated[int | None, typer.Option(help="Episodes in the collection (default: the profile's).")] = None,
-    workers: Annotated[int | None, typer.Option(help="Worker processes or Ray tasks at once.")] = None,
+    episodes: Annotated[int | None, typer.Option(min=1, help="Episodes in the collection (default: the profile's).")] = None,
+    workers: Annotated[int | None, typer.Option(min=1, help="Worker processes or Ray tasks at once.")] = None,
     backend: Annotated[str | None, typer.Option(help="process (default) or ray.")] = None,
     rejected_from: Annotated[Path | None, typer.Option(help="Validation report whose rejected files to redo.")] = (
         paths.VALIDATION_REPORT),
     out_dir: Annotated[Path, typer.Option(help="Folder of episode MCAP files.")] = paths.EPISODES,
-    profile: ProfileOption = "default",
+    profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
     """Collect random-action episodes as MCAP files; resumes, and redoes what validation rejected."""
     from pipelines import collect
 
-    if backend not in (None, "process", "ray"):
-        raise ConfigError(f"--backend: unknown backend {backend!r}; choose 'process' or 'ray'")
+    if backend is not None:
+        _check_choice("--backend", backend, ("process", "ray"))
     result = collect.run(load_profile(profile, params), out_dir, paths.COLLECT_STATS, rejected_from, workers,
                          backend, episodes)
     typer.echo(f"collected {result['collected']} episodes ({result['skipped']} already there), "
@@ -175,8 +207,8 @@ def collect_command(
 
 @app.command("build-dataset")
 def build_dataset_command(
-    workers: Annotated[int | None, typer.Option(help="Worker processes (default: the profile's).")] = None,
-    profile: ProfileOption = "default",
+    workers: Annotated[int | None, typer.Option(min=1, help="Worker processes (default: the profile's).")] = None,
+    profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
     """Write the manifest, one LeRobot dataset per split (8:1:1) and the dataset card."""
@@ -188,7 +220,7 @@ def build_dataset_command(
 
 
 @app.command("validate")
-def validate_command(profile: ProfileOption = "default", params: ParamsOption = DEFAULT_PARAMS) -> None:
+def validate_command(profile: ProfileOption = None, params: ParamsOption = DEFAULT_PARAMS) -> None:
     """Decode every episode file, check it and every split against the manifest and the profile; exit 1 if
     anything is wrong."""
     from pipelines import validate
@@ -241,7 +273,7 @@ def import_real_command(
 
 
 @app.command("train-lnet")
-def train_lnet_command(profile: ProfileOption = "default", params: ParamsOption = DEFAULT_PARAMS) -> None:
+def train_lnet_command(profile: ProfileOption = None, params: ParamsOption = DEFAULT_PARAMS) -> None:
     """Train the L-Net on the train split (early stopping on validation); resumes from its last checkpoint."""
     from pipelines import train_lnet
 
@@ -251,7 +283,7 @@ def train_lnet_command(profile: ProfileOption = "default", params: ParamsOption 
 
 
 @app.command("calibrate-lnet")
-def calibrate_lnet_command(profile: ProfileOption = "default", params: ParamsOption = DEFAULT_PARAMS) -> None:
+def calibrate_lnet_command(profile: ProfileOption = None, params: ParamsOption = DEFAULT_PARAMS) -> None:
     """Fit the uncertainty scales of the trained L-Net on the validation split."""
     from pipelines import calibrate_lnet
 
@@ -261,7 +293,7 @@ def calibrate_lnet_command(profile: ProfileOption = "default", params: ParamsOpt
 
 
 @app.command("eval-lnet")
-def eval_lnet_command(profile: ProfileOption = "default", params: ParamsOption = DEFAULT_PARAMS) -> None:
+def eval_lnet_command(profile: ProfileOption = None, params: ParamsOption = DEFAULT_PARAMS) -> None:
     """Evaluate the L-Net on the test split before and after calibration; write figures and the model card."""
     from pipelines import eval_lnet
 
@@ -279,9 +311,9 @@ def eval_lnet_command(profile: ProfileOption = "default", params: ParamsOption =
 def ablate_lnet_command(
     study: Annotated[str, typer.Option(help="Which variants: actions (previous action as LSTM input or not) or "
                                             "object_head (global MLP or class attention).")] = "actions",
-    steps: Annotated[int, typer.Option(help="Training steps per variant.")] = 300,
-    episodes: Annotated[int, typer.Option(help="Validation/test episodes used to calibrate and score.")] = 100,
-    profile: ProfileOption = "default",
+    steps: Annotated[int, typer.Option(min=1, help="Training steps per variant.")] = 300,
+    episodes: Annotated[int, typer.Option(min=1, help="Validation/test episodes used to calibrate and score.")] = 100,
+    profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
     """Train the variants of one L-Net study at equal budgets and compare them on test."""
@@ -300,19 +332,21 @@ def ablate_lnet_command(
 @bench_app.command("sim")
 def bench_sim(
     task: Annotated[list[str] | None, typer.Option("--task", "-t", help="Task(s) to time; repeat.")] = None,
-    steps: Annotated[int, typer.Option(help="Steps per run.")] = 5000,
-    repeats: Annotated[int, typer.Option(help="Runs per measurement; the median is reported.")] = 3,
-    workers: Annotated[int, typer.Option(help="Worker processes for the parallel measurement.")] = os.cpu_count() or 2,
-    image_size: Annotated[int, typer.Option(help="Image side, pixels.")] = 64,
+    steps: Annotated[int, typer.Option(min=1, help="Steps per run.")] = 5000,
+    repeats: Annotated[int, typer.Option(min=1, help="Runs per measurement; the median is reported.")] = 3,
+    workers: Annotated[int, typer.Option(min=1, help="Worker processes for the parallel measurement.")] = (
+        os.cpu_count() or 2),
+    image_size: Annotated[int, typer.Option(help="Image side, pixels (the simulator's bounds apply).")] = 64,
     out: Annotated[Path, typer.Option(help="JSON to write.")] = Path("datasets/bench/sim.json"),
 ) -> None:
     """Environment steps/s with 64x64 rendering: one process, and one worker per core."""
-    from mor.sim.bench import benchmark_sim
-
     from mor.sim import TASKS
+    from mor.sim.bench import benchmark_sim
+    from mor.sim.config import make_sim_config
     from pipelines.io import write_json
 
     env_ids = [TASKS[_check_task(name)][0] for name in (task or ["rearrange"])]
+    make_sim_config("bench sim", image_size=image_size)  # checked here: a bad size would fail inside every worker
     result = benchmark_sim(env_ids, steps, repeats, workers, {"image_size": image_size})
     for env_id, numbers in result["results"].items():
         typer.echo(f"{env_id}: " + ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
@@ -322,11 +356,11 @@ def bench_sim(
 
 @bench_app.command("collect")
 def bench_collect(
-    episodes: Annotated[int, typer.Option(help="Episodes per run. Worker start-up (about 2 s) is in the wall "
+    episodes: Annotated[int, typer.Option(min=1, help="Episodes per run. Worker start-up (about 2 s) is in the wall "
                                          "clock, so short runs understate the rate of a long collection.")] = 200,
-    repeats: Annotated[int, typer.Option(help="Runs per worker count; the median is reported.")] = 3,
+    repeats: Annotated[int, typer.Option(min=1, help="Runs per worker count; the median is reported.")] = 3,
     out: Annotated[Path, typer.Option(help="JSON to write.")] = Path("datasets/bench/collect.json"),
-    profile: ProfileOption = "default",
+    profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
     """Collection frames/s end to end with one and two workers, bytes per frame, paper-profile projection."""
@@ -352,7 +386,7 @@ def bench_lnet(
     n_envs: Annotated[int, typer.Option(min=1, help="Environments of the streaming measurement.")] = 8,
     steps: Annotated[int, typer.Option(min=1, help="Vector steps per streaming run.")] = 50,
     out: Annotated[Path, typer.Option(help="JSON to write.")] = Path("datasets/bench/lnet.json"),
-    profile: ProfileOption = "default",
+    profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
     """L-Net inference frames/s at batch 1 and 64, and its streaming step beside the environments' own rendered

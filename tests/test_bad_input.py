@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import pytest
+import typer
 import yaml
 from typer.testing import CliRunner
 
@@ -271,3 +273,80 @@ def test_a_horizon_below_one_step_is_refused(horizon: int) -> None:
     with pytest.raises(ConfigError, match="horizon: must be at least 1 step") as error:
         gym.make("MOR/Pick-v0", horizon=horizon, image_size=16)
     assert "\n" not in str(error.value)
+
+
+# ---- every command, bad values ---------------------------------------------------------------------------------
+def _commands() -> dict[str, Any]:
+    """Every leaf command of ``mor``: ``"sim oracle"`` -> its click command."""
+    found: dict[str, Any] = {}
+
+    def walk(command: Any, path: tuple[str, ...]) -> None:
+        for name, sub in (getattr(command, "commands", None) or {}).items():
+            walk(sub, (*path, name))
+        if not getattr(command, "commands", None):
+            found[" ".join(path)] = command
+
+    walk(typer.main.get_command(app), ())
+    return found
+
+
+COMMANDS = _commands()
+#: What each command needs besides the option under test, so that the option's own check is what fails.
+REQUIRED = {"import-real": ["x.mcap", "--object-classes", "0", "--targets", "1,2"]}
+#: Numeric options without a typer bound (a model validates them in the command): a bad value for each.
+UNBOUNDED_BAD = {("import-real", "--fps"): "0", ("import-real", "--image-size"): "8", ("bench sim", "--image-size"): "3"}
+
+
+def _numeric_options() -> list[tuple[str, str, Any]]:
+    """(command, option, its lower bound or None) for every int/float option of every command."""
+    return [(name, param.opts[0], param.min) for name, command in COMMANDS.items() for param in command.params
+            if param.opts[0].startswith("--") and param.type_descriptor.annotation in (int, float)]
+
+
+def _bad_cases() -> list[tuple[list[str], str]]:
+    """(arguments, what the error line must name): the issue's list, then for every numeric option a value
+    that is not a number and one below its bound, and an unknown option for every command."""
+    cases = [
+        (["sim", "oracle", "--seeds", "a,b"], "--seeds"), (["sim", "oracle", "--seeds", "1,-1"], "--seeds"),
+        (["sim", "render", "--seed", "-1"], "--seed"), (["sim", "video", "--policy", "foo"], "--policy"),
+        (["sim", "video", "--out", "v.avi"], "v.avi"), (["collect", "--episodes", "-5"], "--episodes"),
+        (["collect", "--episodes", "0"], "--episodes"), (["collect", "--workers", "0"], "--workers"),
+        (["bench", "sim", "--steps", "-1"], "--steps"), (["collect", "--backend", "threads"], "--backend"),
+    ]
+    for name, option, low in _numeric_options():
+        cases.append(([*name.split(), option, "x", *REQUIRED.get(name, [])], option))
+        bad = str(low - 1) if low is not None else UNBOUNDED_BAD.get((name, option))
+        if bad is not None:
+            cases.append(([*name.split(), option, bad, *REQUIRED.get(name, [])], option.lstrip("-").replace("-", "_")
+                          if low is None else option))
+    cases += [([*name.split(), "--no-such-option"], "--no-such-option") for name in COMMANDS]
+    return cases
+
+
+def test_every_numeric_option_has_a_bound_or_a_bad_case() -> None:
+    missing = [(name, option) for name, option, low in _numeric_options()
+               if low is None and (name, option) not in UNBOUNDED_BAD]
+    assert not missing, f"give these options a typer min= or a bad value in UNBOUNDED_BAD: {missing}"
+
+
+@pytest.mark.parametrize(("args", "named"), _bad_cases(), ids=lambda v: " ".join(v) if isinstance(v, list) else v)
+def test_every_command_refuses_bad_values_in_one_line(runner: CliRunner, repo_root: Path,
+                                                      monkeypatch: pytest.MonkeyPatch, args, named: str) -> None:
+    monkeypatch.chdir(repo_root)
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert isinstance(result.exception, SystemExit) and "Traceback" not in result.output
+    lines = _error_lines(result)
+    assert len(lines) == 1 and lines[0].startswith("error: "), lines
+    assert named in lines[0], lines[0]
+    assert result.stdout == ""
+
+
+@pytest.mark.parametrize("active", [None, ["tiny"], "huge"])
+def test_the_active_profile_must_be_named_in_params_yaml(runner: CliRunner, tmp_path: Path, active) -> None:
+    document = {key: value for key, value in GOOD.items() if key != "profile"}
+    params = write_params(tmp_path, yaml.safe_dump(document if active is None else {**document, "profile": active}))
+    result = runner.invoke(app, ["profile", "--params", str(params)])
+    assert result.exit_code == 2
+    lines = _error_lines(result)
+    assert len(lines) == 1 and str(params) in lines[0] and "profile" in lines[0], lines

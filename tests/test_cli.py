@@ -8,6 +8,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 import pytest
+import yaml
 from PIL import Image
 from typer.testing import CliRunner
 
@@ -100,3 +101,27 @@ def test_help_lists_the_commands(cli) -> None:
     result = cli("sim", "--help")
     for command in ("oracle", "render", "video", "demo"):
         assert command in result.stdout
+
+
+# ---- the active profile: `profile:` in params.yaml, unless --profile says otherwise ------------------------------
+def _params_with_profile(repo_root: Path, tmp_path: Path, name: str) -> Path:
+    document = yaml.safe_load((repo_root / "params.yaml").read_text())
+    path = tmp_path / "params.yaml"
+    path.write_text(yaml.safe_dump({**document, "profile": name}))
+    return path
+
+
+def test_profile_prints_the_active_profile(cli, repo_root: Path, tmp_path: Path) -> None:
+    params = _params_with_profile(repo_root, tmp_path, "tiny")
+    shown = yaml.safe_load(cli("profile", "--params", str(params)).stdout)
+    assert shown["profile"] == "tiny"
+    assert shown["params"]["sim"]["image_size"] == 32 and shown["params"]["collect"]["episode_steps"] == 30
+    assert "exploration" in shown["params"]["collect"]  # resolved: defaults filled in
+    overridden = yaml.safe_load(cli("profile", "--params", str(params), "--profile", "default").stdout)
+    assert overridden["profile"] == "default" and overridden["params"]["sim"]["image_size"] == 64
+
+
+def test_commands_use_the_profile_of_params_yaml(cli, repo_root: Path, tmp_path: Path) -> None:
+    params = _params_with_profile(repo_root, tmp_path, "tiny")
+    cli("sim", "render", "--params", str(params), "--out-dir", str(tmp_path / "out"))
+    assert Image.open(tmp_path / "out" / "rearrange_seed0_first_person.png").size == (32, 32)  # tiny: 32 px

@@ -19,11 +19,12 @@ import numpy as np
 from mor.sim.rollout import RandomPolicy
 
 
-def _steps_per_second(
+def _timed_run(
     env_id: str, steps: int, seed: int, env_kwargs: dict[str, Any], start_together: Any = None
-) -> float:
-    """Random-policy steps/s over ``steps`` steps (resets included), after a short warm-up.
+) -> tuple[float, float]:
+    """(start, end) in seconds of ``steps`` random-policy steps (resets included), after a short warm-up.
 
+    The clock is ``time.monotonic()``, which is system-wide on Linux, so the spans of several processes compare.
     start_together: a multiprocessing Barrier that all workers pass before timing, so their runs overlap.
     """
     env = gym.make(env_id, **env_kwargs)
@@ -35,23 +36,24 @@ def _steps_per_second(
             observation, info = env.reset()
     if start_together is not None:
         start_together.wait()
-    start = time.perf_counter()
+    start = time.monotonic()
     for _ in range(steps):
         observation, _, terminated, truncated, info = env.step(policy(observation, info))
         if terminated or truncated:
             observation, info = env.reset()
-    elapsed = time.perf_counter() - start
+    end = time.monotonic()
     env.close()
-    return steps / elapsed
+    return start, end
 
 
 def _worker(env_id: str, steps: int, seed: int, env_kwargs: dict[str, Any], barrier: Any, results: Any) -> None:
     os.environ.setdefault("LP_NUM_THREADS", "1")  # one llvmpipe thread per worker process
-    results.put(_steps_per_second(env_id, steps, seed, env_kwargs, barrier))
+    results.put(_timed_run(env_id, steps, seed, env_kwargs, barrier))
 
 
 def _parallel_steps_per_second(env_id: str, steps: int, workers: int, env_kwargs: dict[str, Any]) -> float:
-    """Summed steps/s of ``workers`` processes stepping their own envs at the same time (start-up excluded)."""
+    """Steps/s of ``workers`` processes stepping their own envs at once: all their steps over the wall-clock time
+    from the first start to the last finish (start-up excluded). With one worker, that process's own rate."""
     context = mp.get_context("spawn")
     barrier, results = context.Barrier(workers), context.Queue()
     processes = [
@@ -60,10 +62,17 @@ def _parallel_steps_per_second(env_id: str, steps: int, workers: int, env_kwargs
     ]
     for process in processes:
         process.start()
-    rates = [results.get() for _ in processes]
+    spans = [results.get() for _ in processes]
     for process in processes:
         process.join()
-    return float(sum(rates))
+    return combined_steps_per_second(steps, spans)
+
+
+def combined_steps_per_second(steps: int, spans: list[tuple[float, float]]) -> float:
+    """``steps`` per process, each run over its (start, end) span in seconds: all the steps over the wall-clock
+    time from the first start to the last end (not the sum of each process's own rate)."""
+    wall = max(end for _, end in spans) - min(start for start, _ in spans)
+    return steps * len(spans) / wall
 
 
 MINIWORLD_ENV = "MiniWorld-PickupObjects-v0"
@@ -131,6 +140,7 @@ def benchmark_sim(
         "steps_per_run": steps,
         "repeats": repeats,
         "workers": workers,
+        "parallel_rate": "all workers' steps over the wall-clock time from the first start to the last finish",
         "env_kwargs": env_kwargs,
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
                     "MUJOCO_GL": os.environ.get("MUJOCO_GL")},

@@ -10,6 +10,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from mor.atomic import atomic_output
+from mor.errors import ConfigError
 from mor.sim.arena import Arena
 from mor.sim.catalog import ALL_WALL_TEXTURES, OBJECT_RADIUS, object_class
 from mor.sim.episode import EpisodeLayout
@@ -111,11 +112,20 @@ def write_png(path: Path, image: np.ndarray) -> Path:
     return path
 
 
+#: The video formats ``write_video`` writes, by file suffix.
+VIDEO_SUFFIXES: tuple[str, ...] = (".mp4", ".gif")
+
+
+def check_video_path(path: Path) -> Path:
+    """``path`` if its suffix is one of ``VIDEO_SUFFIXES``; ConfigError otherwise (check before playing)."""
+    if path.suffix.lower() not in VIDEO_SUFFIXES:
+        raise ConfigError(f"{path}: a video must end in {' or '.join(VIDEO_SUFFIXES)}; change the file name")
+    return path
+
+
 def write_video(path: Path, frames: Iterable[np.ndarray], fps: int) -> Path:
     """Write frames as MP4 (H.264 through imageio-ffmpeg) or GIF, chosen by ``path``'s suffix."""
-    suffix = path.suffix.lower()
-    if suffix not in (".mp4", ".gif"):
-        raise ValueError(f"{path}: video must end in .mp4 or .gif")
+    suffix = check_video_path(path).suffix.lower()
     stack = np.stack(list(frames))
     with atomic_output(path) as partial:
         if suffix == ".gif":
