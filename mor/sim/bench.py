@@ -116,6 +116,7 @@ def benchmark_sim(
     env_ids: list[str], steps: int, repeats: int, workers: int, env_kwargs: dict[str, Any]
 ) -> dict[str, Any]:
     """Median over ``repeats`` of single-process and ``workers``-process steps/s for each env."""
+    load_before = os.getloadavg()[0]  # other jobs on the machine skew both figures (docs/assumptions.md)
     results: dict[str, Any] = {}
     for env_id in env_ids:
         single = [_parallel_steps_per_second(env_id, steps, 1, env_kwargs) for _ in range(repeats)]
@@ -143,7 +144,7 @@ def benchmark_sim(
         "parallel_rate": "all workers' steps over the wall-clock time from the first start to the last finish",
         "env_kwargs": env_kwargs,
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
-                    "MUJOCO_GL": os.environ.get("MUJOCO_GL")},
+                    "MUJOCO_GL": os.environ.get("MUJOCO_GL"), "load_average_1min_before": load_before},
         "numpy": np.__version__,
         "results": results,
     }
