@@ -76,13 +76,14 @@ def direct_imports(module: str) -> frozenset[str]:
     return frozenset(imports_of_tree(ast.parse(path.read_text(), str(path)), module, path.name == "__init__.py"))
 
 
-def closure(modules: set[str]) -> set[str]:
-    """``modules`` and every repo module they import, transitively (parent packages included)."""
+def closure(modules: set[str], skip: frozenset[str] = frozenset()) -> set[str]:
+    """``modules`` and every repo module they import, transitively (parent packages included); modules in
+    ``skip`` are neither included nor followed."""
     seen: set[str] = set()
     todo = [p for m in modules for p in (*_parents(m), m) if p in repo_modules()]
     while todo:
         module = todo.pop()
-        if module not in seen:
+        if module not in seen and module not in skip:
             seen.add(module)
             todo.extend(direct_imports(module) - seen)
     return seen
