@@ -49,7 +49,7 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     assert build_stats["frames"] == stats["frames"] and sum(build_stats["episodes"].values()) == episodes
     assert build_stats["seconds"]["total"] >= build_stats["seconds"]["lerobot"] > 0
 
-    _run("validate")
+    _run("validate", "--profile", "tiny")
     report = json.loads((workspace / "datasets/validation/report.json").read_text())
     assert report["ok"] and report["seconds"] > 0
 
