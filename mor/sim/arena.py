@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 
-from mor.sim.geometry import Array, point_in_polygon, point_segment_distance
+from mor.sim.geometry import Array
 
 ARENA_SHAPES: tuple[str, ...] = ("square", "polygon")
 
@@ -70,23 +71,49 @@ class Arena:
         """Half the side of the smallest origin-centred square holding the arena (metres)."""
         return float(np.abs(self.vertex_array).max())
 
+    @cached_property
+    def _wall_terms(self) -> tuple[tuple[float, ...], ...]:
+        """Per wall, Python floats: start x, y; end y; direction (end - start) x, y; squared length (>= 1e-18)."""
+        terms = []
+        for (ax, ay), (bx, by) in zip(self.wall_starts.tolist(), self.wall_ends.tolist(), strict=True):
+            dx, dy = bx - ax, by - ay
+            terms.append((ax, ay, by, dx, dy, max(dx * dx + dy * dy, 1e-18)))
+        return tuple(terms)
+
     def clearance(self, point: Array) -> float:
-        """Distance (metres) from ``point`` to the nearest wall; negative when outside the arena."""
-        distance = float(np.min(point_segment_distance(point, self.wall_starts, self.wall_ends)))
-        return distance if point_in_polygon(point, self.vertex_array) else -distance
+        """Distance (metres) from ``point`` (2,) to the nearest wall; negative when outside the arena.
+
+        The scalar form of ``geometry.point_segment_distance`` over the walls and ``geometry.point_in_polygon``:
+        the same float operations in the same order, so the same bits (a test compares them), without numpy's
+        per-call cost on 4-6 walls, which made this the bulk of a reset's rejection sampling.
+        """
+        px, py = float(point[0]), float(point[1])
+        nearest, inside = math.inf, False
+        for ax, ay, by, dx, dy, length_sq in self._wall_terms:
+            t = min(max(((px - ax) * dx + (py - ay) * dy) / length_sq, 0.0), 1.0)
+            ox, oy = px - (ax + t * dx), py - (ay + t * dy)
+            nearest = min(nearest, math.sqrt(ox * ox + oy * oy))
+            if (ay > py) != (by > py) and px < ax + (py - ay) * dx / dy:
+                inside = not inside
+        return nearest if inside else -nearest
 
     def contains(self, point: Array, margin: float = 0.0) -> bool:
         """Whether ``point`` is inside with at least ``margin`` metres to every wall."""
-        return self.clearance(np.asarray(point, dtype=np.float64)) >= margin
+        return self.clearance(point) >= margin
 
     def area(self) -> float:
         """Area in square metres (shoelace formula)."""
         x, y = self.vertex_array.T
         return float(0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
 
+    @cached_property
+    def bounds(self) -> tuple[Array, Array]:
+        """(lower-left (2,), upper-right (2,)) corners of the arena's bounding box, metres."""
+        return self.vertex_array.min(axis=0), self.vertex_array.max(axis=0)
+
     def sample_point(self, rng: np.random.Generator, margin: float, max_tries: int = 200) -> Array | None:
         """A uniform point at least ``margin`` from every wall, or None after ``max_tries`` rejections."""
-        low, high = self.vertex_array.min(axis=0), self.vertex_array.max(axis=0)
+        low, high = self.bounds
         for _ in range(max_tries):
             point = rng.uniform(low, high)
             if self.contains(point, margin):

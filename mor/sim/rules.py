@@ -109,11 +109,19 @@ class Events:
     turned: float = 0.0
 
 
+#: Slack (metres) of ``move_obstructed``'s shortcut: far above float rounding (~1e-15 m), far below any distance
+#: that matters, so the shortcut never changes an answer.
+_SHORTCUT_SLACK: float = 1e-9
+
+
 def move_obstructed(state: WorldState, arena: Arena, distance: float) -> bool:
     """Whether sweeping the agent ``distance`` metres straight ahead hits a wall or an object on the floor."""
     start = state.agent_pose[:2]
     end = start + distance * heading_vector(state.agent_pose[2])
-    if np.min(segment_segment_distance(start, end, arena.wall_starts, arena.wall_ends)) < AGENT_RADIUS:
+    # Every point of the path lies within ``distance`` of its start, so when the start is farther than
+    # distance + AGENT_RADIUS from every wall the exact test below must say "clear": skip it (it costs ~10x more).
+    near_wall = arena.clearance(start) < distance + AGENT_RADIUS + _SHORTCUT_SLACK
+    if near_wall and np.min(segment_segment_distance(start, end, arena.wall_starts, arena.wall_ends)) < AGENT_RADIUS:
         return True
     floor = state.floor_positions[state.on_floor()]
     if len(floor) == 0:

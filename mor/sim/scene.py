@@ -1,13 +1,17 @@
 """The MuJoCo scene: builds the model of an arena with all 24 object classes, and renders first-person views.
 
 All bodies are mocap bodies placed from a ``WorldState``; the rules in ``mor.sim.rules`` decide motion, MuJoCo
-draws it. Rendering settings follow DESIGN.md (shadows and offscreen multisampling off).
+draws it. Rendering settings follow docs/design.md (shadows and offscreen multisampling off). A frame is drawn with
+the same MuJoCo calls as ``mujoco.Renderer`` (so the same pixels) without its per-frame costs: the GL context is
+made current once and then only checked, and the camera and pixel buffer are reused (docs/performance.md).
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -110,6 +114,20 @@ def _yaw_quaternion(theta: float) -> np.ndarray:
     return np.array([np.cos(theta / 2.0), 0.0, 0.0, np.sin(theta / 2.0)])
 
 
+def _current_context_getter(gl: Any) -> Callable[[], Any] | None:
+    """The function that returns this thread's current GL context on ``gl``'s backend (EGL or OSMesa), else None."""
+    backend = sys.modules.get(type(gl).__module__)
+    if hasattr(backend, "EGL"):
+        return backend.EGL.eglGetCurrentContext
+    if hasattr(backend, "osmesa"):
+        return backend.osmesa.OSMesaGetCurrentContext
+    return None
+
+
+#: The size of the scene's geom buffer, as ``mujoco.Renderer`` allocates it.
+_MAX_GEOM: int = 10_000
+
+
 class Scene:
     """One MuJoCo model of an arena plus a lazily created first-person renderer.
 
@@ -121,7 +139,6 @@ class Scene:
         self.image_size = image_size
         self.model = mujoco.MjModel.from_xml_string(build_mjcf(arena, image_size, n_landmarks))
         self.data = mujoco.MjData(self.model)
-        self._renderer: mujoco.Renderer | None = None
         self._scene_option = mujoco.MjvOption()
         self._scene_option.geomgroup[_AGENT_GROUP] = 0
         self._wall_geoms = [self.model.geom(f"wall{k}").id for k in range(arena.n_walls)]
@@ -132,6 +149,19 @@ class Scene:
         self._landmark_geoms = [self.model.geom(f"landmark{i}").id for i in range(n_landmarks)]
         self._agent_mocap = self.model.body("agent").mocapid[0]
         self._episode_mocap = self._episode_geoms = np.zeros(0, dtype=np.int64)
+        # Views into MuJoCo's buffers, fetched once: each attribute access builds a new numpy wrapper.
+        self._mocap_pos, self._mocap_quat = self.data.mocap_pos, self.data.mocap_quat
+        self._geom_alpha = self.model.geom_rgba[:, 3]
+        self._camera = mujoco.MjvCamera()
+        self._camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
+        self._camera.fixedcamid = self.model.camera("fpv").id
+        self._viewport = mujoco.MjrRect(0, 0, image_size, image_size)
+        self._pixels = np.empty((image_size, image_size, 3), np.uint8)  # OpenGL's rows: bottom row first
+        self._gl: Any = None  # mujoco.GLContext of the backend MUJOCO_GL names
+        self._current_context: Callable[[], Any] | None = None
+        self._gl_address: int | None = None
+        self._mjv_scene: mujoco.MjvScene | None = None
+        self._mjr_context: mujoco.MjrContext | None = None
 
     def set_episode(
         self, wall_textures: tuple[int, ...], object_classes: np.ndarray, landmarks: Sequence[tuple[np.ndarray, int]] = ()
@@ -143,45 +173,73 @@ class Scene:
         """
         for geom, texture in zip(self._wall_geoms, wall_textures, strict=True):
             self.model.geom_matid[geom] = self._wall_materials[texture]
-        self.model.geom_rgba[self._object_geoms, 3] = 0.0
-        self.model.geom_rgba[self._landmark_geoms, 3] = 0.0
+        self._geom_alpha[self._object_geoms] = 0.0
+        self._geom_alpha[self._landmark_geoms] = 0.0
         classes = np.asarray(object_classes, dtype=np.int64)
         self._episode_mocap = self._object_mocap[classes]
         self._episode_geoms = self._object_geoms[classes]
         for slot, (position, class_id) in enumerate(landmarks):
-            self.data.mocap_pos[self._landmark_mocap[slot]] = (position[0], position[1], 0.0)
+            self._mocap_pos[self._landmark_mocap[slot]] = (position[0], position[1], 0.0)
             self.model.geom_rgba[self._landmark_geoms[slot]] = (*object_class(int(class_id)).rgb, _LANDMARK_ALPHA)
 
     def set_state(self, state: WorldState) -> None:
         """Place the agent and the objects; the held object is hidden (it leaves the scene)."""
         x, y, theta = state.agent_pose
-        self.data.mocap_pos[self._agent_mocap] = (x, y, 0.0)
-        self.data.mocap_quat[self._agent_mocap] = _yaw_quaternion(theta)
-        self.data.mocap_pos[self._episode_mocap, :2] = state.floor_positions
-        self.model.geom_rgba[self._episode_geoms, 3] = state.on_floor()
+        self._mocap_pos[self._agent_mocap] = (x, y, 0.0)
+        self._mocap_quat[self._agent_mocap] = _yaw_quaternion(theta)
+        self._mocap_pos[self._episode_mocap, :2] = state.floor_positions
+        self._geom_alpha[self._episode_geoms] = 1.0
+        if state.held >= 0:
+            self._geom_alpha[self._episode_geoms[state.held]] = 0.0
         mujoco.mj_kinematics(self.model, self.data)
         mujoco.mj_camlight(self.model, self.data)
 
     def render_first_person(self) -> np.ndarray:
-        """The robot's camera image, (image_size, image_size, 3) uint8."""
-        renderer = self._ensure_renderer()
-        renderer.update_scene(self.data, camera="fpv", scene_option=self._scene_option)
-        return renderer.render()
+        """The robot's camera image, (image_size, image_size, 3) uint8, a new array."""
+        scene, context = self._ensure_renderer()
+        self._make_current()
+        mujoco.mjv_updateScene(self.model, self.data, self._scene_option, None, self._camera,
+                               mujoco.mjtCatBit.mjCAT_ALL.value, scene)
+        mujoco.mjr_render(self._viewport, scene, context)
+        mujoco.mjr_readPixels(self._pixels, None, self._viewport, context)
+        return np.flipud(self._pixels).copy()
 
-    def _ensure_renderer(self) -> mujoco.Renderer:
-        if self._renderer is None:
+    def _make_current(self) -> None:
+        """Make this scene's GL context current unless it already is: the check costs about a microsecond, while
+        eglMakeCurrent costs tens (docs/performance.md). Backends without a check always switch."""
+        if self._current_context is not None:
+            current = self._current_context()
+            if current and current.address == self._gl_address:
+                return
+        self._gl.make_current()
+
+    def _ensure_renderer(self) -> tuple[mujoco.MjvScene, mujoco.MjrContext]:
+        """The scene's geom buffer and MuJoCo's render context, created with the GL context on first use."""
+        if self._mjr_context is None:
             try:
-                self._renderer = mujoco.Renderer(self.model, self.image_size, self.image_size)
+                self._gl = mujoco.GLContext(self.image_size, self.image_size)
+                self._gl.make_current()
+                self._mjr_context = mujoco.MjrContext(self.model, mujoco.mjtFontScale.mjFONTSCALE_150.value)
+                mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, self._mjr_context)
             except Exception as error:  # mujoco raises plain exceptions from the GL layer
+                self.close()
                 backend = os.environ.get("MUJOCO_GL", "")
                 raise RenderBackendError(
                     f"could not create an OpenGL context with MUJOCO_GL={backend!r} ({error}); install Mesa's EGL "
                     "(apt-get install libegl1 libgl1-mesa-dri) or set MUJOCO_GL=osmesa with libosmesa6 installed"
                 ) from None
-        return self._renderer
+            self._current_context = _current_context_getter(self._gl)
+            self._gl_address = self._current_context().address if self._current_context is not None else None
+            self._mjv_scene = mujoco.MjvScene(self.model, maxgeom=_MAX_GEOM)
+        return self._mjv_scene, self._mjr_context
 
     def close(self) -> None:
         """Free the renderer's GL context."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        if self._mjr_context is not None:
+            with self._gl.as_current():
+                self._mjr_context.free()
+            self._mjr_context = None
+        if self._gl is not None:
+            self._gl.free()
+            self._gl = None
+        self._mjv_scene = None
