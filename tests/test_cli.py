@@ -8,6 +8,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 import pytest
+import typer
 import yaml
 from PIL import Image
 from typer.testing import CliRunner
@@ -125,3 +126,15 @@ def test_commands_use_the_profile_of_params_yaml(cli, repo_root: Path, tmp_path:
     params = _params_with_profile(repo_root, tmp_path, "tiny")
     cli("sim", "render", "--params", str(params), "--out-dir", str(tmp_path / "out"))
     assert Image.open(tmp_path / "out" / "rearrange_seed0_first_person.png").size == (32, 32)  # tiny: 32 px
+
+
+def test_every_profile_option_defaults_to_params_yaml() -> None:
+    """No command carries its own default profile: --profile left out means params.yaml's `profile:`."""
+
+    def walk(command, path=()):
+        for name, sub in (getattr(command, "commands", None) or {}).items():
+            yield from walk(sub, (*path, name))
+        yield from ((" ".join(path), p) for p in command.params if p.name == "profile")
+
+    own = [(name, param.default) for name, param in walk(typer.main.get_command(app)) if param.default is not None]
+    assert not own, f"these commands default --profile to a name instead of params.yaml's profile: {own}"
