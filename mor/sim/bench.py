@@ -1,7 +1,8 @@
 """``mor bench sim``: environment steps per second with rendering, in one process and one worker per core.
 
-Every measurement runs in fresh spawned processes with one llvmpipe render thread each (LP_NUM_THREADS=1), ours
-and MiniWorld's alike, and times only the stepping (start-up and warm-up excluded).
+Every measurement runs in fresh spawned processes with llvmpipe drawing in the calling thread
+(``mor.sim.scene.LLVMPIPE_THREADS``), ours and MiniWorld's alike, and times only the stepping (start-up and warm-up
+excluded).
 """
 
 from __future__ import annotations
@@ -47,7 +48,6 @@ def _timed_run(
 
 
 def _worker(env_id: str, steps: int, seed: int, env_kwargs: dict[str, Any], barrier: Any, results: Any) -> None:
-    os.environ.setdefault("LP_NUM_THREADS", "1")  # one llvmpipe thread per worker process
     results.put(_timed_run(env_id, steps, seed, env_kwargs, barrier))
 
 
@@ -80,7 +80,9 @@ MINIWORLD_ENV = "MiniWorld-PickupObjects-v0"
 
 def _miniworld_worker(steps: int, seed: int, results: Any) -> None:
     """MiniWorld's PickupObjects at 64x64, random actions, in its own process (pyglet must go headless first)."""
-    os.environ.setdefault("LP_NUM_THREADS", "1")  # the same render settings as our workers
+    from mor.sim.scene import LLVMPIPE_THREADS  # noqa: PLC0415
+
+    os.environ.setdefault("LP_NUM_THREADS", LLVMPIPE_THREADS)  # the render setting of our env (mor.sim.scene)
     try:
         import pyglet  # noqa: PLC0415
 

@@ -14,6 +14,12 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+#: llvmpipe's render threads (``LP_NUM_THREADS``, read when Mesa creates a GL context); 0 draws in the calling
+#: thread. A 64x64 frame is one llvmpipe tile, so a render thread cannot share the work and only adds a hand-off
+#: per frame: drawing in the caller gives the same pixels for about 15% less CPU per rendered step
+#: (docs/performance.md). An ``LP_NUM_THREADS`` already in the environment wins.
+LLVMPIPE_THREADS: str = "0"
+os.environ.setdefault("LP_NUM_THREADS", LLVMPIPE_THREADS)
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
