@@ -61,7 +61,7 @@ EPISODE_JSON_SCHEMA: dict[str, Any] = {
 def lerobot_features(image_size: int) -> dict[str, dict[str, Any]]:
     """The LeRobot v3.0 features of one frame. Objects are padded to ``MAX_OBJECTS`` slots: an absent slot has
     class -1 and position 0. Positions are flattened (x0, y0, x1, y1, ...). Units: metres and radians, world frame
-    (DESIGN.md). ``action`` is the action taken after the frame (-1 on an episode's last frame).
+    (docs/design.md). ``action`` is the action taken after the frame (-1 on an episode's last frame).
     ``state.object_visible``: 1 where the object is in view by ``mor.sim.rules.visible`` (``mor.data.visibility``),
     0 otherwise and in absent slots.
     """

@@ -61,7 +61,7 @@ class WallTexture:
 
 
 # Each wall side owns a colour family, so that the four (or more) sides of an arena can be told apart
-# from their appearance alone (DESIGN.md). Variants within a family differ in shade and checker size.
+# from their appearance alone (docs/design.md). Variants within a family differ in shade and checker size.
 _FAMILIES: dict[str, tuple[tuple[float, float, float], ...]] = {
     "red": ((0.80, 0.20, 0.20), (0.65, 0.10, 0.25), (0.90, 0.40, 0.30)),
     "blue": ((0.20, 0.30, 0.80), (0.15, 0.45, 0.70), (0.35, 0.25, 0.75)),

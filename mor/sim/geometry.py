@@ -1,4 +1,4 @@
-"""Planar geometry and the frame conventions (DESIGN.md "Frames").
+"""Planar geometry and the frame conventions (docs/design.md, "Frames and units").
 
 World frame: the arena frame, x east, y north, heading theta counter-clockwise from +x, radians.
 Ego frame: x forward, y left, origin at the agent. Units: metres.
