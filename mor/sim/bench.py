@@ -1,6 +1,7 @@
 """``mor bench sim``: environment steps per second with rendering, in one process and one worker per core.
 
-Every measurement runs in fresh spawned processes with llvmpipe drawing in the calling thread
+The JSON also holds where a rendered step's time goes (``mor.sim.step_profile``). Every measurement runs in
+fresh spawned processes with llvmpipe drawing in the calling thread
 (``mor.sim.scene.LLVMPIPE_THREADS``), ours and MiniWorld's alike, and times only the stepping (start-up and warm-up
 excluded).
 """
@@ -18,6 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 from mor.sim.rollout import RandomPolicy
+from mor.sim.step_profile import step_profile
 
 
 def _timed_run(
@@ -149,4 +151,11 @@ def benchmark_sim(
                     "MUJOCO_GL": os.environ.get("MUJOCO_GL"), "load_average_1min_before": load_before},
         "numpy": np.__version__,
         "results": results,
+        "step_profile": {env_id: _step_profile_in_fresh_process(env_id, steps, env_kwargs) for env_id in env_ids},
     }
+
+
+def _step_profile_in_fresh_process(env_id: str, steps: int, env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """``mor.sim.step_profile.step_profile`` in a spawned process, like every other measurement here."""
+    with mp.get_context("spawn").Pool(1) as pool:
+        return pool.apply(step_profile, (env_id, steps, 0, env_kwargs))

@@ -202,12 +202,20 @@ class Scene:
 
     def render_first_person(self) -> np.ndarray:
         """The robot's camera image, (image_size, image_size, 3) uint8, a new array."""
+        self.draw()
+        return self.read_pixels()
+
+    def draw(self) -> None:
+        """Build MuJoCo's scene of the current state and hand it to OpenGL, which draws it (llvmpipe: when read)."""
         scene, context = self._ensure_renderer()
         self._make_current()
         mujoco.mjv_updateScene(self.model, self.data, self._scene_option, None, self._camera,
                                mujoco.mjtCatBit.mjCAT_ALL.value, scene)
         mujoco.mjr_render(self._viewport, scene, context)
-        mujoco.mjr_readPixels(self._pixels, None, self._viewport, context)
+
+    def read_pixels(self) -> np.ndarray:
+        """The drawn frame, (image_size, image_size, 3) uint8, a new array (OpenGL's rows run bottom-up)."""
+        mujoco.mjr_readPixels(self._pixels, None, self._viewport, self._mjr_context)
         return np.flipud(self._pixels).copy()
 
     def _make_current(self) -> None:
