@@ -30,7 +30,7 @@ def run(profile: Profile, workers: int | None = None) -> dict[str, Any]:
     with timed(seconds, "manifest"):
         files = [path for folder in paths.EPISODE_FOLDERS for path in sorted(folder.glob("*.mcap"))]
         table = build_manifest(files, paths.DATASETS, profile_shape(profile), decoded_files(paths.MANIFEST),
-                               progress=True)
+                               workers, progress=True)
         version = manifest_version(table)
     with timed(seconds, "lerobot"):
         counts = build_splits(table.to_pylist(), paths.DATASETS, paths.LEROBOT, version, profile.sim.image_size,

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import math
-import multiprocessing as mp
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -24,10 +23,10 @@ from typing import Any
 
 import numpy as np
 import pyarrow.parquet as pq
-from tqdm import tqdm
 
 from mor.data.episode_io import EpisodeData, read_episode
 from mor.data.manifest import SPLITS, manifest_version
+from mor.data.parallel import ordered_map
 from mor.errors import MorError
 from mor.sim.arena import Arena
 from mor.sim.catalog import N_CLASSES
@@ -211,19 +210,7 @@ def summarize_files(paths: Sequence[Path], workers: int = 1, progress: bool = Tr
     if missing:
         raise CardError(f"{missing[0]}: episode file named in the manifest is missing ({len(missing)} in all); "
                         "re-collect or rebuild the manifest")
-    with tqdm(total=len(paths), desc="card", unit="ep", disable=not progress) as bar:
-        if workers <= 1 or len(paths) < 2 * workers:
-            out = []
-            for path in paths:
-                out.append(_summarize_path(path))
-                bar.update(1)
-            return out
-        with mp.get_context("spawn").Pool(workers) as pool:
-            out = []
-            for summary in pool.imap(_summarize_path, paths, chunksize=8):
-                out.append(summary)
-                bar.update(1)
-            return out
+    return ordered_map(_summarize_path, paths, workers, "card", progress, chunksize=8)
 
 
 def class_histogram(summaries: Iterable[EpisodeSummary]) -> np.ndarray:

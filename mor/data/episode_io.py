@@ -286,7 +286,7 @@ def _decode_episode(path: Path, metadata: dict[str, str], with_images: bool) -> 
     with open(path, "rb") as stream:
         reader = make_reader(stream, validate_crcs=True,
                              decoder_factories=[ProtobufDecoderFactory(), _JsonDecoderFactory()])
-        for _, channel, _, message in reader.iter_decoded_messages(topics=topics):
+        for _, channel, _, message in reader.iter_decoded_messages(topics=topics, log_time_order=False):
             topic = channel.topic
             if topic == schema.TOPIC_IMAGE:
                 images.append(decode_png(message.data))

@@ -20,11 +20,10 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from tqdm import tqdm
-
 from mor.atomic import atomic_output
 from mor.data.collect import ProfileShape
 from mor.data.episode_io import EpisodeFileError, read_metadata, verify_episode
+from mor.data.parallel import ordered_map
 from mor.data.schema import DATASET_LAYOUT
 from mor.errors import MorError
 
@@ -88,33 +87,39 @@ def decoded_files(path: Path) -> dict[str, str]:
     return dict(zip(table["file"].to_pylist(), table["sha256"].to_pylist(), strict=True))
 
 
+def _inspect(job: tuple[Path, ProfileShape, str | None]) -> tuple[dict[str, str] | None, str, str | None]:
+    """(metadata, sha256, problem) of one episode file: decoded whole unless ``decoded_sha`` equals its sha256."""
+    path, shape, decoded_sha = job
+    sha = file_sha256(path)
+    try:
+        metadata = read_metadata(path) if decoded_sha == sha else verify_episode(path)
+    except EpisodeFileError as error:
+        return None, sha, str(error)
+    return metadata, sha, shape.mismatch(path, metadata)
+
+
 def build_manifest(episode_files: list[Path], root: Path, shape: ProfileShape,
-                   decoded: Mapping[str, str] | None = None, progress: bool = False) -> pa.Table:
+                   decoded: Mapping[str, str] | None = None, workers: int = 1, progress: bool = False) -> pa.Table:
     """The manifest of ``episode_files`` (paths stored relative to ``root``), sorted by episode id.
 
-    Every file is decoded whole (``verify_episode``) unless ``decoded`` (``decoded_files`` of the previous
-    manifest) lists it with the same sha256, and its params are compared with ``shape``'s. Raises
-    EpisodesRejected naming the bad files when any is unreadable or made with other data-shaping params.
+    Every file is decoded whole (``verify_episode``, in ``workers`` processes) unless ``decoded``
+    (``decoded_files`` of the previous manifest) lists it with the same sha256, and its params are compared with
+    ``shape``'s. Raises EpisodesRejected naming the bad files when any is unreadable or made with other
+    data-shaping params.
     """
     decoded = decoded or {}
+    jobs = [(path, shape, decoded.get(str(path.relative_to(root)))) for path in episode_files]
     rows, problems, bad = [], [], []
-    for path in tqdm(episode_files, desc="manifest", unit="ep", disable=not progress):
-        relative, sha = str(path.relative_to(root)), file_sha256(path)
-        try:
-            metadata = read_metadata(path) if decoded.get(relative) == sha else verify_episode(path)
-        except EpisodeFileError as error:
-            problems.append(str(error))
-            bad.append(path)
-            continue
-        mismatch = shape.mismatch(path, metadata)
-        if mismatch:
-            problems.append(mismatch)
+    for path, (metadata, sha, problem) in zip(
+            episode_files, ordered_map(_inspect, jobs, workers, "manifest", progress), strict=True):
+        if problem or metadata is None:
+            problems.append(problem)
             bad.append(path)
             continue
         rows.append({
             "episode_id": metadata["episode_id"], "source": metadata["source"],
             "seed": int(metadata["seed"]) if metadata["seed"] else None,
-            "file": relative, "sha256": sha,
+            "file": str(path.relative_to(root)), "sha256": sha,
             "n_frames": int(metadata["n_frames"]), "split": episode_split(metadata["episode_id"]),
         })
     if problems:

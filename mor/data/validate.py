@@ -13,12 +13,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
 from mor.data.collect import ProfileShape
 from mor.data.episode_io import REDO, EpisodeFileError, verify_episode
 from mor.data.lerobot_build import BUILD_STAMP
 from mor.data.manifest import SPLITS, file_sha256
+from mor.data.parallel import ordered_map
 
 
 @dataclass
@@ -74,18 +73,24 @@ def check_split(root: Path, split: str, episodes: int, frames: int) -> tuple[dic
     return found, None
 
 
+def _check(job: tuple[Path, ProfileShape, tuple[str, int] | tuple[()]]) -> str | None:
+    path, shape, expected = job
+    return check_episode_file(path, shape, *expected)
+
+
 def validate(manifest: list[dict], episodes_root: Path, episode_folders: tuple[Path, ...], datasets_root: Path,
-             shape: ProfileShape, progress: bool = True) -> ValidationReport:
-    """Check every manifest episode (paths relative to ``episodes_root``; each decoded whole and compared with
-    ``shape``), that every episode file in ``episode_folders`` is in the manifest (a bad unlisted file is rejected
-    too), and every split; returns the report (does not raise on bad data)."""
+             shape: ProfileShape, progress: bool = True, workers: int = 1) -> ValidationReport:
+    """Check every manifest episode (paths relative to ``episodes_root``; each decoded whole, in ``workers``
+    processes, and compared with ``shape``), that every episode file in ``episode_folders`` is in the manifest (a
+    bad unlisted file is rejected too), and every split; returns the report (does not raise on bad data)."""
     report = ValidationReport()
     listed = {row["file"] for row in manifest}
     unlisted = sorted(p for folder in episode_folders for p in folder.glob("*.mcap")
                       if str(p.relative_to(episodes_root)) not in listed)
     checks = [(episodes_root / row["file"], row) for row in manifest] + [(path, None) for path in unlisted]
-    for path, row in tqdm(checks, desc="validate", unit="ep", disable=not progress):
-        problem = check_episode_file(path, shape, *((row["sha256"], row["n_frames"]) if row else ()))
+    jobs = [(path, shape, (row["sha256"], row["n_frames"]) if row else ()) for path, row in checks]
+    problems = ordered_map(_check, jobs, workers, "validate", progress)
+    for (path, row), problem in zip(checks, problems, strict=True):
         report.episodes_checked += row is not None
         if problem:
             report.problems.append(problem)

@@ -233,3 +233,19 @@ def test_a_killed_builds_scratch_is_removed_and_live_ones_kept(tmp_path: Path, m
     lerobot_build.build_splits([], tmp_path, tmp_path / "lerobot", "v", 16, 10.0, workers=1, progress=False)
     assert not stale.parent.exists()
     assert live.is_dir() and unknown.is_dir()
+
+
+def test_collect_under_another_profile_is_one_line_and_exit_2(repo_root: Path, tmp_path: Path,
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    from typer.testing import CliRunner
+
+    from pipelines.cli import app
+
+    shutil.copy(repo_root / "params.yaml", tmp_path / "params.yaml")
+    monkeypatch.chdir(tmp_path)
+    assert CliRunner().invoke(app, ["collect", "--profile", "tiny", "--episodes", "1"]).exit_code == 0
+    result = CliRunner().invoke(app, ["collect", "--profile", "default", "--episodes", "1"])
+    assert result.exit_code == 2
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and "profile 'default' asks" in lines[0], result.output
+    assert lines[0].endswith("delete datasets/episodes or run with --profile tiny")
