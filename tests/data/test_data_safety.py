@@ -3,6 +3,7 @@ one profile is never used under another, and killed builds leave no scratch behi
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
 import sys
@@ -196,6 +197,16 @@ def test_build_and_validate_refuse_another_profiles_episodes(tiny_dataset: tuple
     report = validate(rows, tiny_collection, (tiny_collection,), root, ProfileShape(OTHER_SPEC), progress=False)
     assert len(report.rejected) == len(rows)
     assert all("was collected with episode_steps=40, sim.image_size=16" in p for p in report.problems)
+
+
+def test_a_real_episode_of_another_image_size_is_refused(tiny_spec: CollectionSpec, tmp_path: Path) -> None:
+    path = tmp_path / "real-run.mcap"
+    metadata = {"source": "real", "params": json.dumps({"import": {"image_size": 32, "fps": 10.0}})}
+    assert ProfileShape(tiny_spec, "tiny").mismatch(path, metadata) == (
+        f"{path} was imported with image_size=32 but profile 'tiny' asks 16: "
+        "re-import it with --image-size 16 --fps 10, or delete it")
+    same = {"source": "real", "params": json.dumps({"import": {"image_size": 16, "fps": 10.0}})}
+    assert ProfileShape(tiny_spec).mismatch(path, same) is None
 
 
 def test_profile_shape_is_named_after_params_yaml(repo_root: Path, monkeypatch: pytest.MonkeyPatch) -> None:
