@@ -11,6 +11,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from mor.data.exploration import ExplorationParams
 from mor.errors import ConfigError
 from mor.lnet.params import LNetParams
+from mor.policy.params import EvalParams, PolicyParams
 from mor.sim.config import SimConfig, format_validation_error
 
 DEFAULT_PARAMS = Path("params.yaml")
@@ -65,6 +66,8 @@ class Profile(_Strict):
     collect: CollectParams = Field(default_factory=CollectParams)
     build: BuildParams = Field(default_factory=BuildParams)
     lnet: LNetParams = Field(default_factory=LNetParams)
+    policy: PolicyParams = Field(default_factory=PolicyParams)
+    evaluate: EvalParams = Field(default_factory=EvalParams)
 
 
 Model = TypeVar("Model", bound=BaseModel)

@@ -408,6 +408,9 @@ def bench_lnet(
     typer.echo(f"wrote {write_json(out, result)}")
 
 
+from pipelines import cli_policy  # noqa: E402,F401 - registers the `policy` and `eval` groups on `app`
+
+
 def main() -> None:  # pragma: no cover - console entry point
     app()
 

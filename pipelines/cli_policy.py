@@ -2,16 +2,16 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from mor.config import DEFAULT_PARAMS, load_profile
+from mor.config import DEFAULT_PARAMS, active_profile, load_profile
 from mor.errors import ConfigError
-from mor.policy.features import TASKS
-from mor.policy.observations import VARIANTS
+from mor.policy.names import TASKS, VARIANTS
 from pipelines import paths
-from pipelines.cli import ParamsOption, ProfileOption, app, new_group
+from pipelines.cli import ParamsOption, ProfileOption, app, bench_app, new_group
 
 policy_app = new_group("Policies: train the pick, drop and decision policies of an observation variant.")
 eval_app = new_group("Evaluation: score methods with the protocol and gather the results card.")
@@ -24,7 +24,7 @@ def policy_train(
     variant: Annotated[str, typer.Option("--variant", "-v", help=f"One of {', '.join(VARIANTS)}.")],
     task: Annotated[list[str] | None, typer.Option("--task", "-t", help="pick, drop, decision (repeat; default: all, "
                                                                          "in that order).")] = None,
-    profile: ProfileOption = "default",
+    profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
     """Train (or resume) a variant's policies; outputs in datasets/policy/<variant>/ and cards/policy/<variant>/."""
@@ -44,20 +44,41 @@ def policy_train(
 def eval_run(
     method: Annotated[str, typer.Option("--method", "-m", help="gt_pose, lnet, lnet_no_uncertainty, "
                                                                 "*_nearest_rule, oracle or random.")],
-    profile: ProfileOption = "default",
+    profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
     """Play the protocol's episodes with a method; per-episode records in datasets/eval/, its row in cards/results/."""
     from pipelines import evaluate  # noqa: PLC0415
 
-    row = evaluate.run(load_profile(profile, params), profile, method)
+    name = active_profile(profile, params)
+    row = evaluate.run(load_profile(name, params), name, method)
     summary = ", ".join(f"{k} {v['mean']:.3f} ± {v['std']:.3f}" for k, v in row["metrics"].items())
     typer.echo(f"{method}: {summary}")
 
 
 @eval_app.command("results")
-def eval_results(profile: ProfileOption = "default") -> None:
+def eval_results(profile: ProfileOption = None) -> None:
     """Gather every method's row of this profile into cards/results/results.json."""
     from pipelines import evaluate  # noqa: PLC0415
 
-    typer.echo(f"wrote {evaluate.collect_results(profile)}")
+    typer.echo(f"wrote {evaluate.collect_results(active_profile(profile))}")
+
+
+@bench_app.command("policy")
+def bench_policy_command(
+    seconds: Annotated[float, typer.Option(min=1.0, help="Seconds per measurement (bounds the run's time).")] = 10.0,
+    repeats: Annotated[int, typer.Option(min=1, help="Timed runs per measurement; the median is reported.")] = 3,
+    out: Annotated[Path, typer.Option(help="JSON to write.")] = Path("datasets/bench/policy.json"),
+    profile: ProfileOption = None,
+    params: ParamsOption = DEFAULT_PARAMS,
+) -> None:
+    """Env steps/s without rendering (gt_pose) and with rendering + the L-Net, and PPO training steps/s for gt_pose
+    and lnet, all in one run (the profile's pick PPO settings; the committed L-Net)."""
+    from mor.policy.bench import bench_policy  # noqa: PLC0415
+    from pipelines.io import write_json  # noqa: PLC0415
+    from pipelines.train_policy import lnet_runner  # noqa: PLC0415
+
+    config = load_profile(profile, params)
+    result = bench_policy(config.sim, config.policy.pick, lnet_runner("lnet"), seconds, repeats)
+    typer.echo(", ".join(f"{k} {v:.0f} steps/s" for k, v in result["steps_per_second"].items()))
+    typer.echo(f"wrote {write_json(out, result)}")

@@ -12,8 +12,8 @@ from mor.config import Profile
 from mor.eval.methods import TrainedPolicies, method_spec
 from mor.eval.protocol import metric_summaries, run_protocol
 from mor.eval.results import ROW_KEYS, arena_label, merge_rows
-from mor.policy.features import TASKS
-from mor.policy.observations import GroundTruthTracker
+from mor.policy.names import TASKS
+from mor.policy.observations import GroundTruthBatchTracker
 from pipelines import paths
 from pipelines.train_policy import lnet_runner
 
@@ -35,15 +35,15 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
                                         with_decision=method.decision == "learned",
                                         deterministic=profile.policy.skills_deterministic)
         if runner is None:
-            tracker_factory = GroundTruthTracker
+            tracker_factory = lambda n: GroundTruthBatchTracker()  # noqa: E731
         else:
-            from mor.policy.lnet_tracking import LNetTracker  # noqa: PLC0415
+            from mor.policy.lnet_tracking import LNetBatchTracker  # noqa: PLC0415
 
-            tracker_factory = lambda: LNetTracker(runner)  # noqa: E731
+            tracker_factory = lambda n: LNetBatchTracker(runner, n)  # noqa: E731
         train_steps = {task: json.loads((paths.POLICY_CARD / method.variant / task / "summary.json").read_text())
                        ["steps"] for task in TASKS if task != "decision" or method.decision == "learned"}
     records = run_protocol(method, sim, protocol.seeds, protocol.episodes, paths.EVAL / f"{method.name}.jsonl",
-                           policies, tracker_factory, progress)
+                           policies, tracker_factory, protocol.n_envs, progress)
     row = {"method": method.name, "encoder": None, "arena": arena_label(sim.arena),
            "policy_arena": arena_label(sim.arena), "n_objects": sim.n_objects, "seeds": protocol.seeds,
            "episodes_per_seed": protocol.episodes, "train_steps": train_steps,

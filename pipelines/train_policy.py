@@ -13,14 +13,13 @@ from typing import Any
 
 from mor.config import Profile
 from mor.policy.envs import make_training_env
-from mor.policy.features import TASKS, Task
 from mor.policy.hierarchy import Skill
-from mor.policy.observations import Variant
+from mor.policy.names import TASKS, Task, Variant
 from mor.policy.signature import PolicySignature
 from mor.policy.train import train_policy
 from pipelines import paths
 
-PUBLISHED = ("model.zip", "meta.json", "log.csv", "learning_curve.png", "summary.json")
+PUBLISHED = ("model.zip", "meta.json", "summary.json", "log.csv", "learning_curve.png")  # the last two if trained
 
 
 def lnet_runner(variant: Variant) -> Any:
@@ -36,7 +35,8 @@ def publish(run_dir: Path, card_dir: Path) -> None:
     """Copy a finished policy's small files to its committed card folder."""
     card_dir.mkdir(parents=True, exist_ok=True)
     for name in PUBLISHED:
-        shutil.copyfile(run_dir / name, card_dir / name)
+        if (run_dir / name).is_file():
+            shutil.copyfile(run_dir / name, card_dir / name)
 
 
 def run(profile: Profile, variant: Variant, tasks: tuple[Task, ...] = TASKS, progress: bool = True) -> list[dict]:
@@ -44,17 +44,23 @@ def run(profile: Profile, variant: Variant, tasks: tuple[Task, ...] = TASKS, pro
     runner = lnet_runner(variant)
     version = runner.dataset_version if runner is not None else None
     summaries = []
+    policy = profile.policy
     for task in tasks:
-        params = getattr(profile.policy, task)
+        params, init_from = getattr(policy, task), None
+        if variant != "gt_pose" and policy.lnet_warm_start:
+            params = params.model_copy(update={"steps": policy.lnet_steps[task]})
+            source = paths.POLICY_CARD / "gt_pose" / task
+            init_from = (source / "model.zip", PolicySignature.model_validate_json(
+                (source / "meta.json").read_text()).observation)
         skills = None
         if task == "decision":
             skills = tuple(Skill.load(paths.POLICY_CARD / variant / name / "model.zip",
-                                      profile.policy.skills_deterministic) for name in ("pick", "drop"))
+                                      policy.skills_deterministic) for name in ("pick", "drop"))
         signature = PolicySignature.of(task, variant, profile.sim.n_objects, profile.sim.arena, version)
         run_dir = paths.POLICIES / variant / task
         summary = train_policy(
             lambda: make_training_env(task, variant, profile.sim, params, runner, skills),  # noqa: B023
-            params, signature, run_dir, profile.policy.seed, f"{variant} {task}", progress)
+            params, signature, run_dir, policy.seed, f"{variant} {task}", progress, init_from)
         publish(run_dir, paths.POLICY_CARD / variant / task)
         summaries.append(summary)
     return summaries

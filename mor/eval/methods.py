@@ -12,9 +12,8 @@ from pathlib import Path
 from typing import Literal
 
 from mor.errors import ConfigError
-from mor.policy.features import TASKS, Task
 from mor.policy.hierarchy import Skill
-from mor.policy.observations import Variant
+from mor.policy.names import TASKS, Task, Variant
 from mor.policy.signature import PolicySignature, check_signature
 
 Decision = Literal["learned", "nearest_rule", "scripted"]

@@ -16,11 +16,14 @@ import numpy as np
 from tqdm import tqdm
 
 from mor.atomic import atomic_output
+from mor.eval.lockstep import Decide, play_lockstep
 from mor.eval.methods import MethodSpec, TrainedPolicies
 from mor.eval.stats import summarize
-from mor.policy.envs import make_policy_env, make_task_env
-from mor.policy.hierarchy import HierarchicalRearrange, nearest_unfixed
-from mor.policy.observations import Tracker, has_uncertainty
+from mor.policy.belief import PoseBelief
+from mor.policy.envs import make_task_env
+from mor.policy.features import observation_vector
+from mor.policy.hierarchy import nearest_unfixed
+from mor.policy.observations import BatchTracker, has_uncertainty
 from mor.sim.config import SimConfig
 from mor.sim.rollout import episode_seed, make_policy, run_episode
 
@@ -30,35 +33,18 @@ METRICS = {"pick_success": ("pick", "success"), "drop_success": ("drop", "succes
            "energy_remaining": ("rearrange", "energy_remaining")}
 
 
-def _play_learned(method: MethodSpec, policies: TrainedPolicies, task: str, sim: SimConfig, tracker: Tracker,
-                  seed: int) -> dict[str, Any]:
-    """One episode of ``task`` by a learned method -> {metrics, steps, return}."""
-    uncertainty = has_uncertainty(method.variant)
-    if task == "rearrange":
-        env = make_policy_env("decision", sim, tracker, uncertainty, (policies.pick, policies.drop))
-        act = _decision_actor(method, policies, env)
-    else:
-        env = make_policy_env(task, sim, tracker, uncertainty)
-        skill = policies.pick if task == "pick" else policies.drop
-        act = lambda vector: skill.act(vector, env.action_masks())  # noqa: E731
-    try:
-        vector, info = env.reset(seed=seed)
-        total, steps = 0.0, 0
-        while True:
-            vector, reward, terminated, truncated, info = env.step(act(vector))
-            total += float(reward)
-            steps += int(info.get("primitive_steps", 1))
-            if terminated or truncated:
-                return {"metrics": dict(info["metrics"]), "steps": steps, "return": total}
-    finally:
-        env.close()
-
-
-def _decision_actor(method: MethodSpec, policies: TrainedPolicies, env: HierarchicalRearrange
-                    ) -> Callable[[np.ndarray], int]:
+def _decider(method: MethodSpec, policies: TrainedPolicies) -> Decide:
+    """The method's decision for k envs at once: its learned decision policy, or the nearest-unfixed rule."""
     if method.decision == "nearest_rule":
-        return lambda vector: nearest_unfixed(env.belief, env.targets)
-    return lambda vector: policies.decision.act(vector, env.action_masks())
+        return lambda belief, held, targets: np.array(
+            [nearest_unfixed(belief.take(k), targets[k]) for k in range(len(held))])
+    uncertainty = has_uncertainty(method.variant)
+
+    def learned(belief: PoseBelief, held: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        vectors = observation_vector(belief, held, "decision", targets, uncertainty)
+        return policies.decision.act_batch(vectors, np.ones((len(held), targets.shape[1]), dtype=bool))
+
+    return learned
 
 
 def _play_scripted(method: MethodSpec, task: str, sim: SimConfig, seed: int) -> dict[str, Any]:
@@ -79,29 +65,46 @@ def episode_keys(seeds: list[int], episodes: int) -> Iterator[tuple[str, int, in
 
 def run_protocol(
     method: MethodSpec, sim: SimConfig, seeds: list[int], episodes: int, records_path: Path,
-    policies: TrainedPolicies | None = None, tracker_factory: Callable[[], Tracker] | None = None,
-    progress: bool = True,
+    policies: TrainedPolicies | None = None, tracker_factory: Callable[[int], BatchTracker] | None = None,
+    n_envs: int = 8, progress: bool = True,
 ) -> list[dict[str, Any]]:
-    """Play every (task, seed, episode) not yet in ``records_path`` (JSON Lines, appended: resumable)."""
+    """Play every (task, seed, episode) not yet in ``records_path`` (JSON Lines, appended: resumable).
+
+    Learned methods play ``n_envs`` episodes in lockstep (``mor.eval.lockstep``) with a tracker from
+    ``tracker_factory(n)``; the scripted ones play one at a time.
+    """
     done = {(r["task"], r["seed"], r["episode"]): r for r in read_records(records_path)}
     todo = [key for key in episode_keys(seeds, episodes) if key not in done]
     with atomic_output(records_path) as partial:  # drop a line cut short by a kill before appending
         partial.write_text("".join(json.dumps(r) + "\n" for r in done.values()))
     with records_path.open("a") as handle, tqdm(total=len(todo), desc=f"eval {method.name}", unit="ep",
                                                 disable=not progress, dynamic_ncols=True) as bar:
-        for task, seed, episode in todo:
-            reset_seed = episode_seed(seed, episode)
-            if method.decision == "scripted":
-                outcome = _play_scripted(method, task, sim, reset_seed)
-            else:
-                outcome = _play_learned(method, policies, task, sim, tracker_factory(), reset_seed)
+        for key, outcome in _play(method, sim, todo, policies, tracker_factory, n_envs):
+            task, seed, episode = key
             record = {"method": method.name, "task": task, "seed": seed, "episode": episode,
-                      "reset_seed": reset_seed, **outcome}
+                      "reset_seed": episode_seed(seed, episode), **outcome}
             handle.write(json.dumps(record) + "\n")
             handle.flush()
-            done[(task, seed, episode)] = record
+            done[key] = record
             bar.update(1)
     return [done[key] for key in episode_keys(seeds, episodes)]
+
+
+def _play(method: MethodSpec, sim: SimConfig, todo: list[tuple[str, int, int]], policies: TrainedPolicies | None,
+          tracker_factory: Callable[[int], BatchTracker] | None, n_envs: int
+          ) -> Iterator[tuple[tuple[str, int, int], dict[str, Any]]]:
+    for task in EVAL_TASKS:
+        keys = [(key, episode_seed(key[1], key[2])) for key in todo if key[0] == task]
+        if not keys:
+            continue
+        if method.decision == "scripted":
+            for key, seed in keys:
+                yield key, _play_scripted(method, task, sim, seed)
+            continue
+        n = min(n_envs, len(keys))
+        skills = {"pick": policies.pick, "drop": policies.drop}
+        yield from play_lockstep(task, keys, sim, tracker_factory(n), skills, _decider(method, policies),
+                                 has_uncertainty(method.variant), n)
 
 
 def read_records(path: Path) -> list[dict[str, Any]]:

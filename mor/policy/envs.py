@@ -7,9 +7,9 @@ from typing import TYPE_CHECKING
 import gymnasium as gym
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 
-from mor.policy.features import Task
 from mor.policy.hierarchy import HierarchicalRearrange, Skill
-from mor.policy.observations import GroundTruthTracker, PoseObservation, Tracker, Variant, has_uncertainty
+from mor.policy.names import Task, Variant
+from mor.policy.observations import GroundTruthTracker, PoseObservation, Tracker, has_uncertainty
 from mor.policy.params import PPOParams
 from mor.sim.config import SimConfig
 
@@ -26,16 +26,17 @@ def make_task_env(task: Task, sim: SimConfig, render_frames: bool, **kwargs: obj
 
 def make_policy_env(
     task: Task, sim: SimConfig, tracker: Tracker, uncertainty: bool, skills: tuple[Skill, Skill] | None = None,
+    **env_kwargs: object,
 ) -> gym.Env:
     """One environment with the policy's observation vector: a ``PoseObservation`` of Pick/Drop, or, for the
     decision, the ``HierarchicalRearrange`` semi-MDP over the frozen ``skills`` (pick, drop). Frames are rendered
-    only when the tracker reads them (never for the ground truth)."""
-    render_frames = not isinstance(tracker, GroundTruthTracker)
+    only when the tracker reads them (never for the ground truth); ``env_kwargs`` go to the MOR env."""
+    env = make_task_env(task, sim, not isinstance(tracker, GroundTruthTracker), **env_kwargs)
     if task == "decision":
         if skills is None:
             raise ValueError("the decision policy's environment needs the trained pick and drop skills")
-        return HierarchicalRearrange(make_task_env(task, sim, render_frames), tracker, *skills, uncertainty)
-    return PoseObservation(make_task_env(task, sim, render_frames), tracker, uncertainty)
+        return HierarchicalRearrange(env, tracker, *skills, uncertainty)
+    return PoseObservation(env, tracker, uncertainty)
 
 
 def make_training_env(

@@ -20,15 +20,12 @@ but without them PPO does not learn Pick (docs/assumptions.md, "Policies").
 
 from __future__ import annotations
 
-from typing import Literal
-
 import numpy as np
 from numpy.typing import NDArray
 
 from mor.policy.belief import PoseBelief
+from mor.policy.names import Task
 
-Task = Literal["pick", "drop", "decision"]
-TASKS: tuple[Task, ...] = ("pick", "drop", "decision")
 
 
 def feature_names(task: Task, n_objects: int, uncertainty: bool) -> list[str]:

@@ -11,6 +11,7 @@ ends as the full task does (all placed, an obstruction, or 1,000 primitive steps
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,8 @@ import numpy as np
 from gymnasium import spaces
 
 from mor.policy.belief import PoseBelief
-from mor.policy.features import Task, observation_vector
+from mor.policy.features import observation_vector
+from mor.policy.names import Task
 from mor.policy.observations import Tracker, observation_space
 from mor.sim.rules import N_ACTIONS, Action
 from mor.sim.tasks import DropEnv, PickEnv, RearrangeEnv
@@ -49,8 +51,13 @@ class Skill:
         return cls(MaskablePPO.load(path, device="cpu"), deterministic)
 
     def act(self, vector: np.ndarray, mask: np.ndarray) -> int:
-        action, _ = self.model.predict(vector, action_masks=mask, deterministic=self.deterministic)
-        return int(action)
+        """vector (D,), mask (A,) -> one action."""
+        return int(self.act_batch(vector[None], mask[None])[0])
+
+    def act_batch(self, vectors: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        """vectors (k, D), masks (k, A) bool -> actions (k,): one forward pass for k environments."""
+        actions, _ = self.model.predict(vectors, action_masks=masks, deterministic=self.deterministic)
+        return np.asarray(actions, dtype=int).reshape(len(vectors))
 
 
 DecisionRule = Callable[[PoseBelief, np.ndarray], int]
@@ -68,6 +75,36 @@ def nearest_unfixed(belief: PoseBelief, targets: np.ndarray) -> int:
     return int(candidates[int(np.argmin(distances))])
 
 
+@dataclass
+class SkillChain:
+    """One environment's place in the hierarchy: which skill runs (``task``; None: a decision is due), on which
+    object (``index``: pick's goal object, or drop's held object whose target it drives to), for how many steps."""
+
+    task: Task | None = None
+    index: int = -1
+    steps: int = 0
+
+    def decide(self, choice: int, held: int, n_objects: int) -> None:
+        """Start decision ``choice``: pick that object, or, when one is already held, drop it."""
+        self.task, self.index, self.steps = ("drop", held, 0) if held < n_objects else ("pick", choice, 0)
+
+    def goal(self, targets: np.ndarray) -> np.ndarray:
+        """The running skill's goal as its observation layout wants it: pick () index, drop (2,) position."""
+        return np.asarray(self.index) if self.task == "pick" else targets[self.index]
+
+    def advance(self, action: int, held: int, n_objects: int) -> bool:
+        """After the skill took ``action`` (and the env stepped): move on; True when the decision is over."""
+        self.steps += 1
+        if self.task == "pick" and (action == Action.PICK or self.steps >= SKILL_HORIZON):
+            if held < n_objects:
+                self.task, self.index, self.steps = "drop", held, 0
+                return False
+            self.task = None
+        elif self.task == "drop" and (action == Action.DROP or self.steps >= SKILL_HORIZON):
+            self.task = None
+        return self.task is None
+
+
 class HierarchicalRearrange(gym.Env):
     """The decision policy's environment: ``MOR/Rearrange-v0`` seen one decision at a time.
 
@@ -81,11 +118,12 @@ class HierarchicalRearrange(gym.Env):
     def __init__(self, env: gym.Env, tracker: Tracker, pick: Skill, drop: Skill, uncertainty: bool = True) -> None:
         if not isinstance(env.unwrapped, RearrangeEnv):
             raise TypeError(f"HierarchicalRearrange needs MOR/Rearrange-v0, got {type(env.unwrapped).__name__}")
-        self.env, self.tracker, self.pick, self.drop = env, tracker, pick, drop
+        self.env, self.tracker, self.skills = env, tracker, {"pick": pick, "drop": drop}
         self.uncertainty = uncertainty
         self.n_objects = env.unwrapped.config.n_objects
         self.observation_space = observation_space("decision", self.n_objects, uncertainty)
         self.action_space = spaces.Discrete(self.n_objects)
+        self.chain = SkillChain()
         self._observation: dict[str, Any] = {}
         self.belief: PoseBelief | None = None
         self.on_step: Callable[[HierarchicalRearrange], None] | None = None  # e.g. a video recorder
@@ -94,20 +132,25 @@ class HierarchicalRearrange(gym.Env):
         super().reset(seed=seed)
         self._observation, info = self.env.reset(seed=seed, options=options)
         self.belief = self.tracker.start(self._observation, info)
+        self.chain = SkillChain()
         self._notify()
-        return self._vector(), info
+        return self._vector("decision", self.targets), info
 
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        if not self.action_space.contains(action) or isinstance(action, bool | np.bool_):
+        if isinstance(action, bool | np.bool_) or not self.action_space.contains(action):
             raise ValueError(f"decision {action!r} is not an object index in [0, {self.n_objects})")
-        total, steps, ended, info = 0.0, 0, False, {}
-        if self._held() == self.n_objects:
-            total, steps, ended, info = self._run_skill("pick", int(action))
-        if not ended and self._held() < self.n_objects:
-            reward, more, ended, info = self._run_skill("drop", self._held())
-            total, steps = total + reward, steps + more
-        terminated, truncated = info.get("terminated", False), info.get("truncated", False)
-        return self._vector(), total, terminated, truncated, {**info, "primitive_steps": steps}
+        self.chain.decide(int(action), self.held, self.n_objects)
+        total, steps = 0.0, 0
+        while True:
+            task = self.chain.task
+            primitive = self.skills[task].act(self._vector(task, self.chain.goal(self.targets)), skill_mask(task))
+            self._observation, reward, terminated, truncated, info = self.env.step(primitive)
+            self.belief = self.tracker.update(self._observation, info, primitive)
+            self._notify()
+            total, steps = total + float(reward), steps + 1
+            if terminated or truncated or self.chain.advance(primitive, self.held, self.n_objects):
+                info["primitive_steps"] = steps
+                return self._vector("decision", self.targets), total, terminated, truncated, info
 
     def action_masks(self) -> np.ndarray:
         return np.ones(self.n_objects, dtype=bool)
@@ -120,33 +163,13 @@ class HierarchicalRearrange(gym.Env):
         """(n, 2) every object's target position, metres (the full task's goal)."""
         return np.asarray(self._observation["target_positions"])
 
-    # ---- helpers ---------------------------------------------------------------------------------------------
-    def _held(self) -> int:
+    @property
+    def held(self) -> int:
+        """The held object's index, n when none (the env's convention)."""
         return int(self._observation["held"])
 
-    def _vector(self) -> np.ndarray:
-        held = np.array([self._held()])
-        return observation_vector(self.belief, held, "decision", self.targets[None], self.uncertainty)[0]
-
-    def _run_skill(self, task: Task, index: int) -> tuple[float, int, bool, dict[str, Any]]:
-        """Run a skill on object ``index`` (pick: that object; drop: towards its target) until it acts or ends."""
-        skill, mask = (self.pick, skill_mask("pick")) if task == "pick" else (self.drop, skill_mask("drop"))
-        final_action = Action.PICK if task == "pick" else Action.DROP
-        total, info = 0.0, {}
-        for step in range(1, SKILL_HORIZON + 1):
-            goal = index if task == "pick" else self.targets[index]
-            vector = observation_vector(self.belief, np.array([self._held()]), task, np.asarray(goal)[None],
-                                        self.uncertainty)[0]
-            action = skill.act(vector, mask)
-            self._observation, reward, terminated, truncated, info = self.env.step(action)
-            self.belief = self.tracker.update(self._observation, info, action)
-            self._notify()
-            total += float(reward)
-            if terminated or truncated:
-                return total, step, True, {**info, "terminated": terminated, "truncated": truncated}
-            if action == final_action:
-                break
-        return total, step, False, info
+    def _vector(self, task: Task, goal: np.ndarray) -> np.ndarray:
+        return observation_vector(self.belief, np.array([self.held]), task, np.asarray(goal)[None], self.uncertainty)[0]
 
     def _notify(self) -> None:
         if self.on_step is not None:

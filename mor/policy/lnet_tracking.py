@@ -10,8 +10,9 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from mor.lnet.runtime import Estimates, LNetRunner
 from mor.policy.belief import PoseBelief
-from mor.policy.features import Task, observation_vector
-from mor.policy.observations import observation_space, task_goal
+from mor.policy.features import observation_vector
+from mor.policy.names import Task
+from mor.policy.observations import SingleTracker, observation_space, task_goal
 
 NO_ACTION = -1  # the "previous action" of an episode's first frame
 
@@ -31,27 +32,30 @@ def _step(runner: LNetRunner, observations: dict[str, np.ndarray], previous: np.
     return belief_from_estimates(estimates), state
 
 
-def _stack(observation: dict[str, Any]) -> dict[str, np.ndarray]:
-    return {key: np.asarray(value)[None] for key, value in observation.items()}
+class LNetBatchTracker:
+    """N environments' beliefs from the L-Net: one forward pass per ``observe`` (the ``BatchTracker`` protocol)."""
+
+    needs_frames = True
+
+    def __init__(self, runner: LNetRunner, n_envs: int) -> None:
+        self.runner = runner
+        self.state = runner.initial_state(n_envs)
+
+    def observe(self, observations: list[dict[str, Any]], infos: list[dict[str, Any]], previous_actions: np.ndarray,
+                starting: np.ndarray) -> PoseBelief:
+        starting = np.asarray(starting, dtype=bool)
+        stacked = {key: np.stack([np.asarray(o[key]) for o in observations]) for key in ("image", "object_classes",
+                                                                                         "held")}
+        previous = np.where(starting, NO_ACTION, np.asarray(previous_actions))
+        belief, self.state = _step(self.runner, stacked, previous, self.runner.reset(self.state, starting))
+        return belief
 
 
-class LNetTracker:
+class LNetTracker(SingleTracker):
     """One environment's belief from the L-Net (the ``Tracker`` protocol of ``mor.policy.observations``)."""
 
     def __init__(self, runner: LNetRunner) -> None:
-        self.runner = runner
-        self.state = runner.initial_state(1)
-
-    def start(self, observation: dict[str, Any], info: dict[str, Any]) -> PoseBelief:
-        self.state = self.runner.initial_state(1)
-        return self._update(observation, NO_ACTION)
-
-    def update(self, observation: dict[str, Any], info: dict[str, Any], action: int) -> PoseBelief:
-        return self._update(observation, action)
-
-    def _update(self, observation: dict[str, Any], action: int) -> PoseBelief:
-        belief, self.state = _step(self.runner, _stack(observation), np.array([action]), self.state)
-        return belief
+        super().__init__(LNetBatchTracker(runner, 1))
 
 
 class LNetVecObservation(VecEnvWrapper):

@@ -7,18 +7,17 @@ vector step. Both build the vector with ``mor.policy.features.observation_vector
 
 from __future__ import annotations
 
-from typing import Any, Literal, Protocol
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from mor.policy.belief import PoseBelief
-from mor.policy.features import Task, observation_size, observation_vector
+from mor.policy.features import observation_size, observation_vector
+from mor.policy.names import Task, Variant
 from mor.sim.tasks import DropEnv, PickEnv, RearrangeEnv
 
-Variant = Literal["gt_pose", "lnet", "lnet_no_uncertainty"]
-VARIANTS: tuple[Variant, ...] = ("gt_pose", "lnet", "lnet_no_uncertainty")
 
 
 def has_uncertainty(variant: Variant) -> bool:
@@ -45,6 +44,27 @@ def observation_space(task: Task, n_objects: int, uncertainty: bool) -> spaces.B
     return spaces.Box(-np.inf, np.inf, (observation_size(task, n_objects, uncertainty),), np.float32)
 
 
+class BatchTracker(Protocol):
+    """Keeps N environments' beliefs. ``observe`` after every step of all N (``starting`` marks the envs whose
+    observation is an episode's first; ``previous_actions`` is -1 there) -> the belief of each (N)."""
+
+    needs_frames: bool
+
+    def observe(self, observations: list[dict[str, Any]], infos: list[dict[str, Any]], previous_actions: np.ndarray,
+                starting: np.ndarray) -> PoseBelief: ...
+
+
+class GroundTruthBatchTracker:
+    """The simulator's truth from each env's ``info``: zero uncertainty, nothing rendered."""
+
+    needs_frames = False
+
+    def observe(self, observations: list[dict[str, Any]], infos: list[dict[str, Any]], previous_actions: np.ndarray,
+                starting: np.ndarray) -> PoseBelief:
+        return PoseBelief.from_truth(np.stack([i["agent_pose"] for i in infos]),
+                                     np.stack([i["object_positions"] for i in infos]))
+
+
 class Tracker(Protocol):
     """Keeps one environment's belief: ``start`` at an episode's first observation, ``update`` after each step."""
 
@@ -53,14 +73,24 @@ class Tracker(Protocol):
     def update(self, observation: dict[str, Any], info: dict[str, Any], action: int) -> PoseBelief: ...
 
 
-class GroundTruthTracker:
-    """The simulator's truth from ``info`` (the paper's "Policy w/ GT poses"): zero uncertainty."""
+class SingleTracker:
+    """One environment's ``Tracker`` over a ``BatchTracker`` of one."""
+
+    def __init__(self, batch: BatchTracker) -> None:
+        self.batch = batch
 
     def start(self, observation: dict[str, Any], info: dict[str, Any]) -> PoseBelief:
-        return PoseBelief.from_truth(info["agent_pose"], info["object_positions"])
+        return self.batch.observe([observation], [info], np.array([-1]), np.array([True]))
 
     def update(self, observation: dict[str, Any], info: dict[str, Any], action: int) -> PoseBelief:
-        return self.start(observation, info)
+        return self.batch.observe([observation], [info], np.array([action]), np.array([False]))
+
+
+class GroundTruthTracker(SingleTracker):
+    """The simulator's truth from ``info`` (the paper's "Policy w/ GT poses"): zero uncertainty."""
+
+    def __init__(self) -> None:
+        super().__init__(GroundTruthBatchTracker())
 
 
 class PoseObservation(gym.Wrapper):

@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from mor.policy.observations import VARIANTS, Variant
+from mor.policy.names import VARIANTS, Task, Variant
 
 
 class _Strict(BaseModel):
@@ -17,7 +17,8 @@ class PPOParams(_Strict):
     """One policy's PPO run (sb3-contrib MaskablePPO). ``hidden``: the MLP's hidden widths; with the output layer
     four hidden layers make the paper's five-layer MLP (shared by the actor and the critic's shapes)."""
 
-    steps: int = Field(300_000, ge=1, description="environment steps (decisions, for the decision policy)")
+    steps: int = Field(300_000, ge=0, description="environment steps (decisions, for the decision policy); 0 with a "
+                                                   "warm start keeps the starting policy as it is")
     n_envs: int = Field(8, ge=1, le=256)
     vec_env: Literal["dummy", "subproc"] = "dummy"
     hidden: list[int] = Field(default_factory=lambda: [256, 256, 256, 256], min_length=1)
@@ -44,6 +45,10 @@ class PolicyParams(_Strict):
     decision: PPOParams = Field(default_factory=lambda: PPOParams(
         steps=10_000, n_envs=4, n_steps=64, batch_size=64, hidden=[128, 128, 128, 128], checkpoint_every=2_000))
     skills_deterministic: bool = Field(True, description="frozen skills act by their most likely action")
+    lnet_warm_start: bool = Field(True, description="L-Net variants start from the gt_pose policies (same layout; "
+                                                    "uncertainty inputs zero-weighted) and train lnet_steps more")
+    lnet_steps: dict[Task, int] = Field(default_factory=lambda: {"pick": 100_000, "drop": 100_000, "decision": 0},
+                                        description="fine-tuning steps of the L-Net variants when warm-started")
 
 
 class EvalParams(_Strict):
@@ -51,4 +56,5 @@ class EvalParams(_Strict):
 
     seeds: list[int] = Field(default_factory=lambda: [0, 1, 2, 3, 4], min_length=1)
     episodes: int = Field(100, ge=1, le=100_000)
+    n_envs: int = Field(8, ge=1, le=256, description="episodes played in lockstep (one batched forward each step)")
     bootstrap_resamples: int = Field(10_000, ge=100)

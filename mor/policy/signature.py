@@ -9,8 +9,9 @@ from pydantic import BaseModel, ConfigDict
 
 from mor.atomic import atomic_output
 from mor.errors import ConfigError
-from mor.policy.features import Task, feature_names
-from mor.policy.observations import Variant, has_uncertainty
+from mor.policy.features import feature_names
+from mor.policy.names import Task, Variant
+from mor.policy.observations import has_uncertainty
 
 
 class PolicySignature(BaseModel):

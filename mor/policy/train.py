@@ -100,13 +100,36 @@ def save_model(model: MaskablePPO, path: Path) -> None:
         model.save(partial)
 
 
+def warm_start(model: MaskablePPO, source: Path, source_names: list[str], names: list[str]) -> None:
+    """Copy the policy at ``source`` into ``model``, matching the first layers' input columns by feature name.
+
+    Inputs ``model`` has and ``source`` lacks get zero weights, so the copy computes exactly the source's function
+    at first (an uncertainty input of an L-Net variant is ignored until fine-tuning learns to use it). Used to
+    start the L-Net variants from the gt_pose policies (docs/assumptions.md, "Policies").
+    """
+    state = MaskablePPO.load(source, device="cpu").policy.state_dict()
+    target = model.policy.state_dict()
+    for key, value in state.items():
+        if value.ndim == 2 and value.shape[1] == len(source_names) and target[key].shape[1] == len(names):
+            columns = torch.zeros_like(target[key])
+            for j, name in enumerate(names):
+                if name in source_names:
+                    columns[:, j] = value[:, source_names.index(name)]
+            state[key] = columns
+        elif value.shape != target[key].shape:
+            raise ValueError(f"{source}: layer {key} has shape {tuple(value.shape)}, the new policy "
+                             f"{tuple(target[key].shape)}; warm starts need the same hidden layers")
+    model.policy.load_state_dict(state)
+
+
 def train_policy(
     make_env: Callable[[], VecEnv], params: PPOParams, signature: PolicySignature, out_dir: Path, seed: int,
-    label: str, progress: bool = True,
+    label: str, progress: bool = True, init_from: tuple[Path, list[str]] | None = None,
 ) -> dict[str, Any]:
     """Train (or resume) one MaskablePPO policy for ``params.steps`` steps on ``make_env()``'s environments
-    (``mor.policy.envs.make_training_env``)."""
-    torch.set_num_threads(1)  # 2.4-10x faster than torch's default on 2 cores (DESIGN.md, measured)
+    (``mor.policy.envs.make_training_env``). init_from: (a policy's model.zip, its feature names) to start from
+    (``warm_start``) instead of a random initialization."""
+    torch.set_num_threads(1)  # 2.4-10x faster than torch's default on 2 cores (docs/design.md, "Decisions")
     out_dir.mkdir(parents=True, exist_ok=True)
     env = make_env()
     checkpoint = out_dir / "checkpoint.zip"
@@ -121,6 +144,8 @@ def train_policy(
             clip_range=params.clip_range, ent_coef=params.ent_coef, vf_coef=params.vf_coef,
             max_grad_norm=params.max_grad_norm,
         )
+        if init_from is not None:
+            warm_start(model, init_from[0], init_from[1], signature.observation)
     model.set_logger(configure(str(out_dir / "tb"), ["tensorboard"]))
     monitor = TrainingMonitor(out_dir, params.steps, params.checkpoint_every, label, progress)
     started = time.monotonic()
@@ -132,7 +157,8 @@ def train_policy(
     env.close()
     save_model(model, out_dir / "model.zip")
     write_signature(out_dir / "meta.json", signature)
-    write_learning_curve(out_dir / "log.csv", out_dir / "learning_curve.png", label)
+    if (out_dir / "log.csv").is_file():
+        write_learning_curve(out_dir / "log.csv", out_dir / "learning_curve.png", label)
     summary = {"label": label, "steps": int(model.num_timesteps), "seed": seed,
                "wall_seconds_this_run": round(wall, 1),
                "steps_per_second_this_run": round(remaining / wall, 1) if remaining > 0 else None,

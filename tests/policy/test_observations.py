@@ -13,7 +13,8 @@ from mor.lnet.params import LNetConfig
 from mor.lnet.runtime import LNetRunner
 from mor.policy.belief import PoseBelief
 from mor.policy.envs import make_policy_env, make_task_env
-from mor.policy.features import TASKS, feature_names, observation_vector
+from mor.policy.features import feature_names, observation_vector
+from mor.policy.names import TASKS
 from mor.policy.lnet_tracking import LNetTracker, LNetVecObservation
 from mor.policy.observations import GroundTruthTracker
 from mor.sim.config import SimConfig

@@ -1,0 +1,11 @@
+"""The names the policy layer's parameters use (no heavy imports: ``mor.config`` reads them)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+Task = Literal["pick", "drop", "decision"]
+TASKS: tuple[Task, ...] = ("pick", "drop", "decision")
+
+Variant = Literal["gt_pose", "lnet", "lnet_no_uncertainty"]
+VARIANTS: tuple[Variant, ...] = ("gt_pose", "lnet", "lnet_no_uncertainty")
