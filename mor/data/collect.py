@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
+import os
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -181,6 +182,7 @@ _WORKER: EpisodeCollector | None = None
 
 def _init_worker(spec: CollectionSpec, out_dir: Path) -> None:
     global _WORKER
+    os.environ.setdefault("LP_NUM_THREADS", "1")  # one llvmpipe render thread per worker process
     _WORKER = EpisodeCollector(spec, out_dir)
 
 
@@ -191,6 +193,7 @@ def _collect_in_worker(index: int) -> int:
 
 def _collect_batch(spec: CollectionSpec, out_dir: Path, batch: list[int]) -> list[int]:
     """One Ray task: a fresh collector (one renderer) for a batch of episodes."""
+    os.environ.setdefault("LP_NUM_THREADS", "1")
     collector = EpisodeCollector(spec, out_dir)
     try:
         return [collector.collect(index) for index in batch]

@@ -1,9 +1,8 @@
 """``mor bench sim``: environment steps per second with rendering, in one process and one worker per core.
 
 The JSON also holds where a rendered step's time goes (``mor.sim.step_profile``). Every measurement runs in
-fresh spawned processes with llvmpipe drawing in the calling thread
-(``mor.sim.scene.LLVMPIPE_THREADS``), ours and MiniWorld's alike, and times only the stepping (start-up and warm-up
-excluded).
+fresh spawned processes with one llvmpipe render thread each (LP_NUM_THREADS=1), ours and MiniWorld's alike, and
+times only the stepping (start-up and warm-up excluded).
 """
 
 from __future__ import annotations
@@ -50,6 +49,7 @@ def _timed_run(
 
 
 def _worker(env_id: str, steps: int, seed: int, env_kwargs: dict[str, Any], barrier: Any, results: Any) -> None:
+    os.environ.setdefault("LP_NUM_THREADS", "1")  # one llvmpipe thread per worker process
     results.put(_timed_run(env_id, steps, seed, env_kwargs, barrier))
 
 
@@ -82,9 +82,7 @@ MINIWORLD_ENV = "MiniWorld-PickupObjects-v0"
 
 def _miniworld_worker(steps: int, seed: int, results: Any) -> None:
     """MiniWorld's PickupObjects at 64x64, random actions, in its own process (pyglet must go headless first)."""
-    from mor.sim.scene import LLVMPIPE_THREADS  # noqa: PLC0415
-
-    os.environ.setdefault("LP_NUM_THREADS", LLVMPIPE_THREADS)  # the render setting of our env (mor.sim.scene)
+    os.environ.setdefault("LP_NUM_THREADS", "1")  # the same render settings as our workers
     try:
         import pyglet  # noqa: PLC0415
 
@@ -155,7 +153,12 @@ def benchmark_sim(
     }
 
 
+def _step_profile_worker(env_id: str, steps: int, env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    os.environ.setdefault("LP_NUM_THREADS", "1")  # the render settings of the rates above
+    return step_profile(env_id, steps, 0, env_kwargs)
+
+
 def _step_profile_in_fresh_process(env_id: str, steps: int, env_kwargs: dict[str, Any]) -> dict[str, Any]:
     """``mor.sim.step_profile.step_profile`` in a spawned process, like every other measurement here."""
     with mp.get_context("spawn").Pool(1) as pool:
-        return pool.apply(step_profile, (env_id, steps, 0, env_kwargs))
+        return pool.apply(_step_profile_worker, (env_id, steps, env_kwargs))

@@ -14,12 +14,6 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 os.environ.setdefault("MUJOCO_GL", "egl")
-#: llvmpipe's render threads (``LP_NUM_THREADS``, read when Mesa creates a GL context); 0 draws in the calling
-#: thread. A 64x64 frame is one llvmpipe tile, so a render thread cannot share the work and only adds a hand-off
-#: per frame: drawing in the caller gives the same pixels for about 15% less CPU per rendered step
-#: (docs/performance.md). An ``LP_NUM_THREADS`` already in the environment wins.
-LLVMPIPE_THREADS: str = "0"
-os.environ.setdefault("LP_NUM_THREADS", LLVMPIPE_THREADS)
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
@@ -206,7 +200,7 @@ class Scene:
         return self.read_pixels()
 
     def draw(self) -> None:
-        """Build MuJoCo's scene of the current state and hand it to OpenGL, which draws it (llvmpipe: when read)."""
+        """Build MuJoCo's scene of the current state and hand its commands to OpenGL (llvmpipe draws on read)."""
         scene, context = self._ensure_renderer()
         self._make_current()
         mujoco.mjv_updateScene(self.model, self.data, self._scene_option, None, self._camera,
