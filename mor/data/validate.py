@@ -15,7 +15,6 @@ from typing import Any
 
 from mor.data.collect import ProfileShape
 from mor.data.episode_io import REDO, EpisodeFileError, verify_episode
-from mor.data.lerobot_build import BUILD_STAMP
 from mor.data.manifest import SPLITS, file_sha256
 from mor.data.parallel import ordered_map
 
@@ -59,6 +58,8 @@ def check_episode_file(path: Path, shape: ProfileShape, expected_sha256: str | N
 
 def check_split(root: Path, split: str, episodes: int, frames: int) -> tuple[dict[str, int], str | None]:
     """Compare a built split's episode and frame totals with the manifest's."""
+    from mor.data.lerobot_build import BUILD_STAMP  # noqa: PLC0415 - it imports torch, which checking workers need not
+
     found = {"episodes": 0, "frames": 0}
     info_path = root / "meta" / "info.json"
     if episodes == 0 and (root / BUILD_STAMP).is_file():
