@@ -19,6 +19,6 @@ LNET = DATASETS / "lnet"                  # training run: checkpoint.pt (resume)
 LNET_CALIBRATION = LNET / "calibration.json"
 LNET_CARD = Path("cards/lnet")            # model card, committed weights, metrics and figures
 POLICIES = DATASETS / "policy"           # policy training runs: <variant>/<task>/ checkpoints, logs, TensorBoard
-POLICY_CARD = Path("cards/policy")        # committed policies: <variant>/<task>/model.zip + meta.json, card, curves
+POLICY_CARD = Path("cards/policy")        # committed policies: <variant>/<task>/policy.pth + meta.json, card, curves
 EVAL = DATASETS / "eval"                  # per-episode records: <method>.jsonl
 RESULTS_CARD = Path("cards/results")      # rows/<method>.json, results.json, README.md (the tables)

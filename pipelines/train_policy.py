@@ -1,7 +1,7 @@
 """Stage ``train_policy``: phase I (pick, drop) then phase II (decision) for one observation variant.
 
 Training runs in ``datasets/policy/<variant>/<task>/`` (checkpoints, logs, TensorBoard); the finished policy
-(model.zip, meta.json, log.csv, learning_curve.png, summary.json) is copied to ``cards/policy/<variant>/<task>/``,
+(policy.pth, meta.json, log.csv, learning_curve.png, summary.json) is copied to ``cards/policy/<variant>/<task>/``,
 committed so that a fresh clone can evaluate without retraining.
 """
 
@@ -13,13 +13,13 @@ from typing import Any
 
 from mor.config import Profile
 from mor.policy.envs import make_training_env
-from mor.policy.hierarchy import Skill
+from mor.policy.hierarchy import POLICY_FILE, Skill
 from mor.policy.names import TASKS, Task, Variant
 from mor.policy.signature import PolicySignature
 from mor.policy.train import train_policy
 from pipelines import paths
 
-PUBLISHED = ("model.zip", "meta.json", "summary.json", "log.csv", "learning_curve.png")  # the last two if trained
+PUBLISHED = (POLICY_FILE, "meta.json", "summary.json", "log.csv", "learning_curve.png")  # the last two if trained
 
 
 def lnet_runner(variant: Variant) -> Any:
@@ -50,11 +50,11 @@ def run(profile: Profile, variant: Variant, tasks: tuple[Task, ...] = TASKS, pro
         if variant != "gt_pose" and policy.lnet_warm_start:
             params = params.model_copy(update={"steps": policy.lnet_steps[task]})
             source = paths.POLICY_CARD / "gt_pose" / task
-            init_from = (source / "model.zip", PolicySignature.model_validate_json(
+            init_from = (source / POLICY_FILE, PolicySignature.model_validate_json(
                 (source / "meta.json").read_text()).observation)
         skills = None
         if task == "decision":
-            skills = tuple(Skill.load(paths.POLICY_CARD / variant / name / "model.zip",
+            skills = tuple(Skill.load(paths.POLICY_CARD / variant / name / POLICY_FILE,
                                       policy.skills_deterministic) for name in ("pick", "drop"))
         signature = PolicySignature.of(task, variant, profile.sim.n_objects, profile.sim.arena, version)
         run_dir = paths.POLICIES / variant / task

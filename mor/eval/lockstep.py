@@ -104,7 +104,8 @@ def _act(slots: list[_Slot], active: list[int], belief: PoseBelief, task: str, s
         else:
             goals = np.stack([task_goal(slots[i].observation, skill_task) for i in group])
         held = np.array([slots[i].observation["held"] for i in group])
-        vectors = observation_vector(belief.take(np.array(group)), held, skill_task, goals, uncertainty)
+        vectors = observation_vector(belief.take(np.array(group)), held, skill_task, goals, uncertainty,
+                                     slots[group[0]].env.arena)
         masks = np.stack([skill_mask(skill_task)] * len(group))
         actions.update(zip(group, skills[skill_task].act_batch(vectors, masks).tolist(), strict=True))
     return actions

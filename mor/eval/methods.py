@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Literal
 
 from mor.errors import ConfigError
-from mor.policy.hierarchy import Skill
+from mor.policy.hierarchy import POLICY_FILE, Skill
 from mor.policy.names import TASKS, Task, Variant
 from mor.policy.signature import PolicySignature, check_signature
 
@@ -60,10 +60,10 @@ class TrainedPolicies:
     @classmethod
     def load(cls, root: Path, variant: Variant, n_objects: int, arena: str, lnet_version: str | None,
              with_decision: bool, deterministic: bool = True) -> TrainedPolicies:
-        """Load ``root/variant/{pick,drop,decision}/model.zip``, each checked against its ``meta.json``."""
+        """Load ``root/variant/{pick,drop,decision}/policy.pth``, each checked against its ``meta.json``."""
         skills: dict[str, Skill | None] = {"decision": None}
         for task in TASKS if with_decision else ("pick", "drop"):
             folder = policy_dir(root, variant, task)
             check_signature(folder / "meta.json", PolicySignature.of(task, variant, n_objects, arena, lnet_version))
-            skills[task] = Skill.load(folder / "model.zip", deterministic)
+            skills[task] = Skill.load(folder / POLICY_FILE, deterministic)
         return cls(skills["pick"], skills["drop"], skills["decision"])

@@ -24,6 +24,7 @@ from mor.policy.envs import make_task_env
 from mor.policy.features import observation_vector
 from mor.policy.hierarchy import nearest_unfixed
 from mor.policy.observations import BatchTracker, has_uncertainty
+from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
 from mor.sim.rollout import episode_seed, make_policy, run_episode
 
@@ -33,7 +34,7 @@ METRICS = {"pick_success": ("pick", "success"), "drop_success": ("drop", "succes
            "energy_remaining": ("rearrange", "energy_remaining")}
 
 
-def _decider(method: MethodSpec, policies: TrainedPolicies) -> Decide:
+def _decider(method: MethodSpec, policies: TrainedPolicies, arena: Arena) -> Decide:
     """The method's decision for k envs at once: its learned decision policy, or the nearest-unfixed rule."""
     if method.decision == "nearest_rule":
         return lambda belief, held, targets: np.array(
@@ -41,7 +42,7 @@ def _decider(method: MethodSpec, policies: TrainedPolicies) -> Decide:
     uncertainty = has_uncertainty(method.variant)
 
     def learned(belief: PoseBelief, held: np.ndarray, targets: np.ndarray) -> np.ndarray:
-        vectors = observation_vector(belief, held, "decision", targets, uncertainty)
+        vectors = observation_vector(belief, held, "decision", targets, uncertainty, arena)
         return policies.decision.act_batch(vectors, np.ones((len(held), targets.shape[1]), dtype=bool))
 
     return learned
@@ -103,7 +104,8 @@ def _play(method: MethodSpec, sim: SimConfig, todo: list[tuple[str, int, int]], 
             continue
         n = min(n_envs, len(keys))
         skills = {"pick": policies.pick, "drop": policies.drop}
-        yield from play_lockstep(task, keys, sim, tracker_factory(n), skills, _decider(method, policies),
+        decide = _decider(method, policies, Arena.build(sim.arena, sim.arena_size))
+        yield from play_lockstep(task, keys, sim, tracker_factory(n), skills, decide,
                                  has_uncertainty(method.variant), n)
 
 

@@ -7,6 +7,7 @@ triple is [σ_forward m, σ_left m, correlation] of a covariance rotated into th
 - agent: x, y, cos θ, sin θ                                              4
 - each object: x, y, polar                                               5 n
 - held: one-hot over the n objects and "nothing"                         n + 1
+- clearance: free distance ahead along 5 rays (-60..60 deg), m            5  (``mor.policy.clearance``)
 - goal, by task:
     pick      one-hot goal object (n), polar of the goal object (3)
     drop      goal position x, y (2), polar of the goal position (3)
@@ -24,7 +25,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mor.policy.belief import PoseBelief
+from mor.policy.clearance import RAY_ANGLES, clearance
 from mor.policy.names import Task
+from mor.sim.arena import Arena
 
 
 
@@ -35,6 +38,7 @@ def feature_names(task: Task, n_objects: int, uncertainty: bool) -> list[str]:
     for i in range(n_objects):
         names += [f"object{i}_x", f"object{i}_y", *(f"object{i}_{p}" for p in polar)]
     names += [f"held_{i}" for i in range(n_objects)] + ["held_none"]
+    names += [f"clearance_{round(float(np.rad2deg(a))):+d}deg" for a in RAY_ANGLES]
     if task == "pick":
         names += [f"goal_is_{i}" for i in range(n_objects)] + [f"goal_{p}" for p in polar]
     elif task == "drop":
@@ -81,9 +85,9 @@ def _ego_uncertainty(covariance: NDArray, heading: NDArray) -> NDArray:
 
 
 def observation_vector(
-    belief: PoseBelief, held: NDArray, task: Task, goal: NDArray, uncertainty: bool
+    belief: PoseBelief, held: NDArray, task: Task, goal: NDArray, uncertainty: bool, arena: Arena
 ) -> NDArray[np.float32]:
-    """The flat observation (N, D) of ``feature_names(task, n, uncertainty)``.
+    """The flat observation (N, D) of ``feature_names(task, n, uncertainty)`` in ``arena`` (its walls are known).
 
     held (N,) index of the held object, n when none (the env's convention). goal by task: pick (N,) object
     index; drop (N, 2) target position, m; decision (N, n, 2) every object's target position, m.
@@ -92,7 +96,7 @@ def observation_vector(
     rows = np.arange(n_envs)
     parts = [belief.agent_mean, np.cos(belief.heading)[:, None], np.sin(belief.heading)[:, None],
              np.concatenate([belief.object_mean, _polar(belief, belief.object_mean)], -1).reshape(n_envs, -1),
-             np.eye(n + 1, dtype=np.float32)[np.asarray(held, int)]]
+             np.eye(n + 1, dtype=np.float32)[np.asarray(held, int)], clearance(belief, held, arena)]
     if task == "pick":
         index = np.asarray(goal, int).reshape(n_envs)
         parts += [np.eye(n, dtype=np.float32)[index], _polar(belief, belief.object_mean[rows, index])]

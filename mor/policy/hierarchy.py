@@ -37,8 +37,12 @@ def skill_mask(task: Task) -> np.ndarray:
     return mask
 
 
+POLICY_FILE = "policy.pth"  # a trained policy for inference: sb3-contrib's MaskableActorCriticPolicy.save
+
+
 class Skill:
-    """A frozen sub-policy: ``act(vector (D,), mask (5,)) -> action`` from a saved sb3-contrib MaskablePPO."""
+    """A frozen policy: ``act(vector (D,), mask (A,)) -> action`` from sb3-contrib's MaskablePPO (a trained
+    ``MaskablePPO`` or its ``MaskableActorCriticPolicy``: anything with ``predict(..., action_masks=...)``)."""
 
     def __init__(self, model: Any, deterministic: bool = True) -> None:
         self.model = model
@@ -46,9 +50,10 @@ class Skill:
 
     @classmethod
     def load(cls, path: Path, deterministic: bool = True) -> Skill:
-        from sb3_contrib import MaskablePPO  # noqa: PLC0415 - torch/SB3 load only where a model is used
+        """The policy saved at ``path`` (a ``policy.pth``)."""
+        from sb3_contrib.common.maskable.policies import MaskableActorCriticPolicy  # noqa: PLC0415 - torch here only
 
-        return cls(MaskablePPO.load(path, device="cpu"), deterministic)
+        return cls(MaskableActorCriticPolicy.load(path, device="cpu"), deterministic)
 
     def act(self, vector: np.ndarray, mask: np.ndarray) -> int:
         """vector (D,), mask (A,) -> one action."""
@@ -169,7 +174,8 @@ class HierarchicalRearrange(gym.Env):
         return int(self._observation["held"])
 
     def _vector(self, task: Task, goal: np.ndarray) -> np.ndarray:
-        return observation_vector(self.belief, np.array([self.held]), task, np.asarray(goal)[None], self.uncertainty)[0]
+        return observation_vector(self.belief, np.array([self.held]), task, np.asarray(goal)[None], self.uncertainty,
+                                  self.env.unwrapped.arena)[0]
 
     def _notify(self) -> None:
         if self.on_step is not None:

@@ -66,6 +66,7 @@ class LNetVecObservation(VecEnvWrapper):
     def __init__(self, venv: VecEnv, runner: LNetRunner, task: Task, n_objects: int, uncertainty: bool) -> None:
         super().__init__(venv, observation_space=observation_space(task, n_objects, uncertainty))
         self.runner, self.task, self.uncertainty = runner, task, uncertainty
+        self.arena = venv.get_attr("arena")[0]
         self.state = runner.initial_state(venv.num_envs)
         self.actions = np.full(venv.num_envs, NO_ACTION)
 
@@ -101,4 +102,4 @@ class LNetVecObservation(VecEnvWrapper):
 
     def _vectors(self, belief: PoseBelief, observations: dict[str, np.ndarray]) -> np.ndarray:
         goal = task_goal(observations, self.task)
-        return observation_vector(belief, observations["held"], self.task, goal, self.uncertainty)
+        return observation_vector(belief, observations["held"], self.task, goal, self.uncertainty, self.arena)

@@ -121,4 +121,5 @@ class PoseObservation(gym.Wrapper):
     def _vector(self, observation: dict[str, Any], info: dict[str, Any], belief: PoseBelief) -> np.ndarray:
         info["belief"] = belief
         goal = task_goal(observation, self.task)[None]
-        return observation_vector(belief, np.array([observation["held"]]), self.task, goal, self.uncertainty)[0]
+        return observation_vector(belief, np.array([observation["held"]]), self.task, goal, self.uncertainty,
+                                  self.env.unwrapped.arena)[0]

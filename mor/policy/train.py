@@ -1,7 +1,8 @@
 """Training one policy with sb3-contrib's MaskablePPO, read top to bottom: environments, model, loop, outputs.
 
 Outputs in ``out_dir``: ``checkpoint.zip`` (every ``checkpoint_every`` steps; a killed run resumes from it),
-``model.zip`` + ``meta.json`` (the finished policy and what it was trained on), ``log.csv`` (one row per
+``model.zip`` (the finished run, resumable), ``policy.pth`` + ``meta.json`` (the finished policy for inference and
+what it was trained on), ``log.csv`` (one row per
 rollout), ``tb/`` (TensorBoard), ``learning_curve.png`` and ``summary.json`` (steps, wall time, rates).
 """
 
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 from sb3_contrib import MaskablePPO
+from sb3_contrib.common.maskable.policies import MaskableActorCriticPolicy
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.vec_env import VecEnv
@@ -26,6 +28,7 @@ from tqdm import tqdm
 from mor.atomic import atomic_output
 from mor.policy.figures import write_learning_curve
 from mor.policy.params import PPOParams
+from mor.policy.hierarchy import POLICY_FILE
 from mor.policy.signature import PolicySignature, write_signature
 
 CSV_FIELDS = ("steps", "wall_seconds", "steps_per_second", "episodes", "return_mean", "success_mean")
@@ -100,14 +103,21 @@ def save_model(model: MaskablePPO, path: Path) -> None:
         model.save(partial)
 
 
+def save_policy(model: MaskablePPO, path: Path) -> None:
+    """The inference-only policy (weights and spaces, no optimizer state: a third of ``model.zip``), through a
+    partial name; ``mor.policy.hierarchy.Skill.load`` reads it."""
+    with atomic_output(path) as partial:
+        model.policy.save(partial)
+
+
 def warm_start(model: MaskablePPO, source: Path, source_names: list[str], names: list[str]) -> None:
-    """Copy the policy at ``source`` into ``model``, matching the first layers' input columns by feature name.
+    """Copy the policy at ``source`` (a ``policy.pth``) into ``model``, matching the first layers' input columns by feature name.
 
     Inputs ``model`` has and ``source`` lacks get zero weights, so the copy computes exactly the source's function
     at first (an uncertainty input of an L-Net variant is ignored until fine-tuning learns to use it). Used to
     start the L-Net variants from the gt_pose policies (docs/assumptions.md, "Policies").
     """
-    state = MaskablePPO.load(source, device="cpu").policy.state_dict()
+    state = MaskableActorCriticPolicy.load(source, device="cpu").state_dict()
     target = model.policy.state_dict()
     for key, value in state.items():
         if value.ndim == 2 and value.shape[1] == len(source_names) and target[key].shape[1] == len(names):
@@ -127,7 +137,7 @@ def train_policy(
     label: str, progress: bool = True, init_from: tuple[Path, list[str]] | None = None,
 ) -> dict[str, Any]:
     """Train (or resume) one MaskablePPO policy for ``params.steps`` steps on ``make_env()``'s environments
-    (``mor.policy.envs.make_training_env``). init_from: (a policy's model.zip, its feature names) to start from
+    (``mor.policy.envs.make_training_env``). init_from: (a policy's policy.pth, its feature names) to start from
     (``warm_start``) instead of a random initialization."""
     torch.set_num_threads(1)  # 2.4-10x faster than torch's default on 2 cores (docs/design.md, "Decisions")
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -156,6 +166,7 @@ def train_policy(
     wall = time.monotonic() - started
     env.close()
     save_model(model, out_dir / "model.zip")
+    save_policy(model, out_dir / POLICY_FILE)
     write_signature(out_dir / "meta.json", signature)
     if (out_dir / "log.csv").is_file():
         write_learning_curve(out_dir / "log.csv", out_dir / "learning_curve.png", label)

@@ -18,9 +18,11 @@ from mor.policy.envs import make_policy_env
 from mor.policy.hierarchy import Skill
 from mor.policy.lnet_tracking import LNetBatchTracker, LNetTracker
 from mor.policy.observations import GroundTruthBatchTracker, GroundTruthTracker
+from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
 
 SIM = SimConfig(n_objects=2, image_size=16)
+ARENA = Arena.build("square", 6.0)
 
 
 def _skill(task: str, seed: int) -> Skill:
@@ -67,7 +69,7 @@ def _one_at_a_time(task: str, seed: int, tracker, policies: TrainedPolicies, met
         act = lambda vector: skill.act(vector, env.action_masks())  # noqa: E731
     else:
         env = make_policy_env("decision", SIM, tracker, True, (policies.pick, policies.drop), horizon=HORIZON)
-        decide = _decider(METHODS[method], policies)
+        decide = _decider(METHODS[method], policies, ARENA)
         act = lambda vector: int(decide(env.belief, np.array([env.held]), env.targets[None])[0])  # noqa: E731
     vector, _ = env.reset(seed=seed)
     total, steps = 0.0, 0
@@ -88,7 +90,7 @@ def test_lockstep_equals_one_episode_at_a_time(task: str, method: str, policies:
     keys = [((task, 0, e), 100 + e) for e in range(3)]
     skills = {"pick": policies.pick, "drop": policies.drop}
     played = dict(play_lockstep(task, keys, SIM, GroundTruthBatchTracker(), skills,
-                                _decider(METHODS[method], policies), True, n_envs=2, horizon=HORIZON))
+                                _decider(METHODS[method], policies, ARENA), True, n_envs=2, horizon=HORIZON))
     for key, seed in keys:
         alone = _one_at_a_time(task, seed, GroundTruthTracker(), policies, method)
         assert played[key]["metrics"] == alone["metrics"] and played[key]["steps"] == alone["steps"], key
@@ -99,7 +101,7 @@ def test_lockstep_with_the_lnet_equals_one_tracker_per_episode(quick: TrainedPol
     runner = LNetRunner(LNet(LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)), Calibration(), 16, "test")
     keys = [(("rearrange", 0, e), 200 + e) for e in range(3)]
     played = dict(play_lockstep("rearrange", keys, SIM, LNetBatchTracker(runner, 2),
-                                {"pick": quick.pick, "drop": quick.drop}, _decider(METHODS["lnet_nearest_rule"], quick),
+                                {"pick": quick.pick, "drop": quick.drop}, _decider(METHODS["lnet_nearest_rule"], quick, ARENA),
                                 True, n_envs=2, horizon=HORIZON))
     for key, seed in keys:
         alone = _one_at_a_time("rearrange", seed, LNetTracker(runner), quick, "lnet_nearest_rule")

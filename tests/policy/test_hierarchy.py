@@ -82,7 +82,7 @@ def test_training_writes_its_outputs_and_resumes_from_the_checkpoint(tmp_path: P
     make = lambda params: lambda: make_training_env("pick", "gt_pose", SIM, params)  # noqa: E731
     first = train_policy(make(TINY_PPO), TINY_PPO, signature, tmp_path, 0, "pick", progress=False)
     assert first["steps"] == 64
-    for name in ("checkpoint.zip", "model.zip", "meta.json", "log.csv", "learning_curve.png", "summary.json"):
+    for name in ("checkpoint.zip", "model.zip", "policy.pth", "meta.json", "log.csv", "learning_curve.png", "summary.json"):
         assert (tmp_path / name).is_file(), name
     longer = TINY_PPO.model_copy(update={"steps": 128})
     second = train_policy(make(longer), longer, signature, tmp_path, 0, "pick", progress=False)

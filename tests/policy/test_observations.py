@@ -17,9 +17,11 @@ from mor.policy.features import feature_names, observation_vector
 from mor.policy.names import TASKS
 from mor.policy.lnet_tracking import LNetTracker, LNetVecObservation
 from mor.policy.observations import GroundTruthTracker
+from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
 
 SIM = SimConfig(n_objects=2, image_size=16)
+ARENA = Arena.build("square", 6.0)
 
 
 def _belief(agent=(0.0, 0.0, 0.0), objects=((2.0, 0.0), (0.0, 1.0))) -> PoseBelief:
@@ -30,14 +32,14 @@ def _belief(agent=(0.0, 0.0, 0.0), objects=((2.0, 0.0), (0.0, 1.0))) -> PoseBeli
 @pytest.mark.parametrize("uncertainty", [True, False])
 def test_the_vector_has_one_entry_per_named_feature(task: str, uncertainty: bool) -> None:
     goal = {"pick": np.array([1]), "drop": np.array([[1.0, 1.0]]), "decision": np.zeros((1, 2, 2))}[task]
-    vector = observation_vector(_belief(), np.array([2]), task, goal, uncertainty)
+    vector = observation_vector(_belief(), np.array([2]), task, goal, uncertainty, ARENA)
     assert vector.shape == (1, len(feature_names(task, 2, uncertainty)))
     assert vector.dtype == np.float32
 
 
 def test_egocentric_goal_features_are_distance_and_bearing_in_the_agent_frame() -> None:
     belief = _belief(agent=(0.0, 0.0, np.pi / 2))  # facing north (+y)
-    vector = observation_vector(belief, np.array([2]), "pick", np.array([1]), uncertainty=False)[0]
+    vector = observation_vector(belief, np.array([2]), "pick", np.array([1]), False, ARENA)[0]
     named = dict(zip(feature_names("pick", 2, False), vector, strict=True))
     assert named["goal_distance"] == pytest.approx(1.0)  # object 1 at (0, 1): straight ahead
     assert named["goal_cos_bearing"] == pytest.approx(1.0)
@@ -49,7 +51,8 @@ def test_covariances_are_rotated_into_the_agent_frame() -> None:
     belief = PoseBelief(truth.agent_mean, np.array([[[4.0, 0.0], [0.0, 1.0]]], np.float32), truth.heading,
                         np.array([0.25], np.float32), truth.object_mean, np.zeros((1, 2, 2, 2), np.float32))
     named = dict(zip(feature_names("drop", 2, True),
-                     observation_vector(belief, np.array([2]), "drop", np.array([[1.0, 1.0]]), True)[0], strict=True))
+                     observation_vector(belief, np.array([2]), "drop", np.array([[1.0, 1.0]]), True, ARENA)[0],
+                     strict=True))
     assert named["agent_sigma_forward"] == pytest.approx(1.0)  # world y is forward when facing north
     assert named["agent_sigma_left"] == pytest.approx(2.0)
     assert named["heading_sigma"] == pytest.approx(0.5)
@@ -93,3 +96,18 @@ def test_the_batched_lnet_wrapper_equals_one_tracker_per_env_across_episode_ends
                 vector = env.reset()[0]  # DummyVecEnv resets without a seed: the env's own generator goes on
             single[i] = vector
     assert ends > 0, "the test must cross at least one episode end"
+
+
+def test_clearance_is_the_free_distance_to_walls_and_floor_objects_but_not_the_held_one() -> None:
+    from mor.policy.clearance import RAY_ANGLES, clearance
+    from mor.sim.catalog import OBJECT_RADIUS
+    from mor.sim.rules import AGENT_RADIUS
+
+    ahead = int(np.flatnonzero(RAY_ANGLES == 0.0)[0])
+    belief = _belief(agent=(0.0, 0.0, 0.0), objects=((1.0, 0.0), (0.0, 2.0)))
+    free = clearance(belief, np.array([2]), ARENA)[0]
+    assert free[ahead] == pytest.approx(1.0 - AGENT_RADIUS - OBJECT_RADIUS)
+    carried = clearance(belief, np.array([0]), ARENA)[0]  # object 0 is held: the ray reaches the east wall
+    assert carried[ahead] == pytest.approx(min(3.0 - AGENT_RADIUS, 3.0))
+    near_wall = clearance(_belief(agent=(2.5, 0.0, 0.0)), np.array([2]), ARENA)[0]
+    assert near_wall[ahead] == pytest.approx(0.5 - AGENT_RADIUS)
