@@ -145,7 +145,8 @@ def sim_render(
 @sim_app.command("video")
 def sim_video(
     task: Annotated[str | None, typer.Option("--task", "-t", help="pick, drop or rearrange (default: the profile's).")] = None,
-    policy: Annotated[str | None, typer.Option(help="oracle or random (default: the profile's).")] = None,
+    policy: Annotated[str | None, typer.Option(help="oracle, random, or a trained method: gt_pose, lnet, "
+                                                     "lnet_no_uncertainty, *_nearest_rule (default: the profile's).")] = None,
     seed: Annotated[int | None, typer.Option(min=0, help="Episode seed (default: the profile's).")] = None,
     out: Annotated[Path, typer.Option(help="Video file: .mp4 or .gif.")] = Path("datasets/renders/demo.mp4"),
     profile: ProfileOption = None,
@@ -158,6 +159,16 @@ def sim_video(
 
     config = load_profile(profile, params)
     policies = typing.get_args(DemoParams.model_fields["policy"].annotation)
+    if policy is not None and policy not in policies:
+        from mor.eval.methods import METHODS
+        from pipelines.evaluate import policy_video
+
+        if METHODS[_check_choice("--policy", policy, tuple(METHODS))].variant is not None:  # a trained method: its hierarchy plays the full task
+            if task not in (None, "rearrange"):
+                raise ConfigError(f"--task: a trained policy plays the full task; use --task rearrange (got {task!r})")
+            metrics = policy_video(config, policy, seed if seed is not None else config.demo.seed, check_video_path(out))
+            typer.echo(f"wrote {out} (metrics {metrics})")
+            return
     overrides = {"task": task and _check_task(task), "policy": policy and _check_choice("--policy", policy, policies),
                  "seed": seed}
     demo = validated(DemoParams, "sim video", **{**config.demo.model_dump(),
@@ -309,8 +320,9 @@ def eval_lnet_command(profile: ProfileOption = None, params: ParamsOption = DEFA
 
 @app.command("ablate-lnet")
 def ablate_lnet_command(
-    study: Annotated[str, typer.Option(help="Which variants: actions (previous action as LSTM input or not) or "
-                                            "object_head (global MLP or class attention).")] = "actions",
+    study: Annotated[str, typer.Option(help="Which variants: actions (previous action as LSTM input or not), "
+                                            "object_head (global MLP or class attention) or tracker (lstm or "
+                                            "filter, with and without the visibility loss).")] = "actions",
     steps: Annotated[int, typer.Option(min=1, help="Training steps per variant.")] = 300,
     episodes: Annotated[int, typer.Option(min=1, help="Validation/test episodes used to calibrate and score.")] = 100,
     profile: ProfileOption = None,

@@ -82,3 +82,24 @@ def bench_policy_command(
     result = bench_policy(config.sim, config.policy.pick, lnet_runner("lnet"), seconds, repeats)
     typer.echo(", ".join(f"{k} {v:.0f} steps/s" for k, v in result["steps_per_second"].items()))
     typer.echo(f"wrote {write_json(out, result)}")
+
+
+@eval_app.command("tables")
+def eval_tables(
+    table: Annotated[list[int] | None, typer.Option("--table", min=1, max=4, help="Table number (repeat; default: "
+                                                                                   "every table).")] = None,
+) -> None:
+    """Print Tables 1-4 from cards/results/results.json; a table with rows missing is one error naming them."""
+    import json  # noqa: PLC0415
+
+    from mor.eval.tables import TABLES, require_complete, table_markdown  # noqa: PLC0415
+
+    path = paths.RESULTS_CARD / "results.json"
+    if not path.is_file():
+        raise ConfigError(f"{path}: no results yet; run mor eval run --method <method>, then mor eval results")
+    rows = json.loads(path.read_text())["rows"]
+    for number in table or sorted(TABLES):
+        if number not in TABLES:
+            raise ConfigError(f"--table: Table {number} is not built yet; available: {', '.join(map(str, TABLES))}")
+        require_complete(TABLES[number], rows)
+        typer.echo(f"Table {number}: {TABLES[number].title}\n{table_markdown(TABLES[number], rows)}\n")

@@ -4,16 +4,21 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from mor.atomic import atomic_output
 from mor.config import Profile
-from mor.eval.methods import TrainedPolicies, method_spec
-from mor.eval.protocol import metric_summaries, run_protocol
+from mor.eval.card import write_results_card
+from mor.eval.methods import MethodSpec, TrainedPolicies, method_spec
+from mor.eval.protocol import decider, metric_summaries, run_protocol
+from mor.eval.video import write_policy_video
 from mor.eval.results import ROW_KEYS, arena_label, merge_rows
 from mor.policy.names import TASKS
-from mor.policy.observations import GroundTruthBatchTracker
+from mor.errors import ConfigError
+from mor.policy.observations import BatchTracker, GroundTruthBatchTracker, SingleTracker, has_uncertainty
+from mor.sim.arena import Arena
 from pipelines import paths
 from pipelines.train_policy import lnet_runner
 
@@ -23,23 +28,28 @@ def _write_json(path: Path, payload: Any) -> None:
         partial.write_text(json.dumps(payload, indent=2) + "\n")
 
 
+def load_method(profile: Profile, method: MethodSpec) -> tuple[TrainedPolicies, Callable[[int], BatchTracker]]:
+    """A learned method's committed policies (checked against what they were trained on) and its tracker factory."""
+    sim = profile.sim
+    runner = lnet_runner(method.variant)
+    version = runner.dataset_version if runner is not None else None
+    policies = TrainedPolicies.load(paths.POLICY_CARD, method.variant, sim.n_objects, sim.arena, version,
+                                    with_decision=method.decision == "learned",
+                                    deterministic=profile.policy.skills_deterministic)
+    if runner is None:
+        return policies, lambda n: GroundTruthBatchTracker()
+    from mor.policy.lnet_tracking import LNetBatchTracker  # noqa: PLC0415
+
+    return policies, lambda n: LNetBatchTracker(runner, n)
+
+
 def run(profile: Profile, profile_name: str, method_name: str, progress: bool = True) -> dict[str, Any]:
     """Evaluate ``method_name`` with the profile's protocol; write its row to ``cards/results/rows/``."""
     method = method_spec(method_name)
     sim, protocol = profile.sim, profile.evaluate
     policies, tracker_factory, train_steps = None, None, None
     if method.variant is not None:
-        runner = lnet_runner(method.variant)
-        version = runner.dataset_version if runner is not None else None
-        policies = TrainedPolicies.load(paths.POLICY_CARD, method.variant, sim.n_objects, sim.arena, version,
-                                        with_decision=method.decision == "learned",
-                                        deterministic=profile.policy.skills_deterministic)
-        if runner is None:
-            tracker_factory = lambda n: GroundTruthBatchTracker()  # noqa: E731
-        else:
-            from mor.policy.lnet_tracking import LNetBatchTracker  # noqa: PLC0415
-
-            tracker_factory = lambda n: LNetBatchTracker(runner, n)  # noqa: E731
+        policies, tracker_factory = load_method(profile, method)
         train_steps = {task: json.loads((paths.POLICY_CARD / method.variant / task / "summary.json").read_text())
                        ["steps"] for task in TASKS if task != "decision" or method.decision == "learned"}
     records = run_protocol(method, sim, protocol.seeds, protocol.episodes, paths.EVAL / f"{method.name}.jsonl",
@@ -52,13 +62,27 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
     return row
 
 
+def policy_video(profile: Profile, method_name: str, seed: int, out: Path) -> dict[str, float]:
+    """One rearrangement episode of a learned method, first-person beside the truth and its belief, to ``out``."""
+    method = method_spec(method_name)
+    if method.variant is None:
+        raise ConfigError(f"--policy: {method_name!r} is scripted; use mor sim video --policy {method_name}")
+    policies, tracker_factory = load_method(profile, method)
+    arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
+    return write_policy_video(out, profile.sim, SingleTracker(tracker_factory(1)), policies.pick, policies.drop,
+                              decider(method, policies, arena), has_uncertainty(method.variant), seed)
+
+
 def collect_results(profile_name: str) -> Path:
-    """Merge every row in ``cards/results/rows/`` of this profile into ``cards/results/results.json``."""
+    """Merge every row in ``cards/results/rows/`` of this profile into ``cards/results/results.json`` and render
+    the tables into ``cards/results/README.md``."""
     rows = [json.loads(p.read_text()) for p in sorted((paths.RESULTS_CARD / "rows").glob("*.json"))]
     path = paths.RESULTS_CARD / "results.json"
     existing = json.loads(path.read_text()) if path.is_file() else {"profile": profile_name, "rows": []}
     if existing.get("profile") != profile_name:
         existing = {"profile": profile_name, "rows": []}
     merged = merge_rows(existing["rows"], [r for r in rows if r.get("profile") == profile_name])
-    _write_json(path, {"profile": profile_name, "row_keys": list(ROW_KEYS), "rows": merged})
+    results = {"profile": profile_name, "row_keys": list(ROW_KEYS), "rows": merged}
+    _write_json(path, results)
+    write_results_card(results, paths.RESULTS_CARD)
     return path

@@ -34,7 +34,7 @@ METRICS = {"pick_success": ("pick", "success"), "drop_success": ("drop", "succes
            "energy_remaining": ("rearrange", "energy_remaining")}
 
 
-def _decider(method: MethodSpec, policies: TrainedPolicies, arena: Arena) -> Decide:
+def decider(method: MethodSpec, policies: TrainedPolicies, arena: Arena) -> Decide:
     """The method's decision for k envs at once: its learned decision policy, or the nearest-unfixed rule."""
     if method.decision == "nearest_rule":
         return lambda belief, held, targets: np.array(
@@ -104,7 +104,7 @@ def _play(method: MethodSpec, sim: SimConfig, todo: list[tuple[str, int, int]], 
             continue
         n = min(n_envs, len(keys))
         skills = {"pick": policies.pick, "drop": policies.drop}
-        decide = _decider(method, policies, Arena.build(sim.arena, sim.arena_size))
+        decide = decider(method, policies, Arena.build(sim.arena, sim.arena_size))
         yield from play_lockstep(task, keys, sim, tracker_factory(n), skills, decide,
                                  has_uncertainty(method.variant), n)
 

@@ -164,6 +164,11 @@ class HierarchicalRearrange(gym.Env):
         self.env.close()
 
     @property
+    def observation(self) -> dict[str, Any]:
+        """The full task's latest raw observation (``image`` when the env renders frames)."""
+        return self._observation
+
+    @property
     def targets(self) -> np.ndarray:
         """(n, 2) every object's target position, metres (the full task's goal)."""
         return np.asarray(self._observation["target_positions"])

@@ -9,7 +9,7 @@ from sb3_contrib import MaskablePPO
 
 from mor.eval.lockstep import play_lockstep
 from mor.eval.methods import METHODS, TrainedPolicies
-from mor.eval.protocol import _decider
+from mor.eval.protocol import decider
 from mor.lnet.calibration import Calibration
 from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig
@@ -69,7 +69,7 @@ def _one_at_a_time(task: str, seed: int, tracker, policies: TrainedPolicies, met
         act = lambda vector: skill.act(vector, env.action_masks())  # noqa: E731
     else:
         env = make_policy_env("decision", SIM, tracker, True, (policies.pick, policies.drop), horizon=HORIZON)
-        decide = _decider(METHODS[method], policies, ARENA)
+        decide = decider(METHODS[method], policies, ARENA)
         act = lambda vector: int(decide(env.belief, np.array([env.held]), env.targets[None])[0])  # noqa: E731
     vector, _ = env.reset(seed=seed)
     total, steps = 0.0, 0
@@ -90,7 +90,7 @@ def test_lockstep_equals_one_episode_at_a_time(task: str, method: str, policies:
     keys = [((task, 0, e), 100 + e) for e in range(3)]
     skills = {"pick": policies.pick, "drop": policies.drop}
     played = dict(play_lockstep(task, keys, SIM, GroundTruthBatchTracker(), skills,
-                                _decider(METHODS[method], policies, ARENA), True, n_envs=2, horizon=HORIZON))
+                                decider(METHODS[method], policies, ARENA), True, n_envs=2, horizon=HORIZON))
     for key, seed in keys:
         alone = _one_at_a_time(task, seed, GroundTruthTracker(), policies, method)
         assert played[key]["metrics"] == alone["metrics"] and played[key]["steps"] == alone["steps"], key
@@ -101,7 +101,7 @@ def test_lockstep_with_the_lnet_equals_one_tracker_per_episode(quick: TrainedPol
     runner = LNetRunner(LNet(LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)), Calibration(), 16, "test")
     keys = [(("rearrange", 0, e), 200 + e) for e in range(3)]
     played = dict(play_lockstep("rearrange", keys, SIM, LNetBatchTracker(runner, 2),
-                                {"pick": quick.pick, "drop": quick.drop}, _decider(METHODS["lnet_nearest_rule"], quick, ARENA),
+                                {"pick": quick.pick, "drop": quick.drop}, decider(METHODS["lnet_nearest_rule"], quick, ARENA),
                                 True, n_envs=2, horizon=HORIZON))
     for key, seed in keys:
         alone = _one_at_a_time("rearrange", seed, LNetTracker(runner), quick, "lnet_nearest_rule")

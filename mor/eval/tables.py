@@ -1,0 +1,177 @@
+"""The paper's Tables 1-4 as views of ``cards/results/results.json``: our rows beside the paper's numbers.
+
+Every number of ours comes from a row of results.json (written by ``mor eval run``); the paper's come from
+``mor.eval.paper`` and are labelled "paper". A table whose rows are not all there renders what exists and names
+each missing row with the command that produces it (``require_complete`` turns that into one error instead).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mor.errors import ConfigError
+from mor.eval import paper
+from mor.eval.paper import LOWER_IS_BETTER, METRIC_NAMES
+
+METRIC_LABELS = {"pick_success": "Pick", "drop_success": "Drop", "rearrange_success": "Rearr. success",
+                 "fixed_strict": "%FS", "energy_remaining": "%E ↓"}
+
+
+@dataclass(frozen=True)
+class TableRow:
+    """One line of a table: our row (selected by ``match`` from results.json) and the paper's row, if any."""
+
+    label: str
+    match: dict[str, Any]
+    paper: tuple[tuple[float, float] | None, ...] | None = None
+    command: str = ""
+
+
+@dataclass(frozen=True)
+class TableSpec:
+    number: int
+    title: str
+    rows: list[TableRow] = field(default_factory=list)
+
+
+def _ours(method: str, **setting: Any) -> dict[str, Any]:
+    return {"method": method, "arena": "rect", "policy_arena": "rect", "n_objects": 3, **setting}
+
+
+def _eval(method: str, extra: str = "") -> str:
+    return f"mor eval run --method {method}{extra}"
+
+
+TABLES: dict[int, TableSpec] = {
+    1: TableSpec(1, "Our methods and the baselines (paper Table 1)", [
+        TableRow("Policy w/ GT poses (gt_pose)", _ours("gt_pose"), paper.TABLE1["Policy w/ GT poses"], _eval("gt_pose")),
+        TableRow("Ours: L-Net + uncertainty (lnet)", _ours("lnet"), paper.TABLE1["Ours"], _eval("lnet")),
+        TableRow("gt_pose sub-policies + nearest-object rule", _ours("gt_pose_nearest_rule"), None,
+                 _eval("gt_pose_nearest_rule")),
+        TableRow("lnet sub-policies + nearest-object rule", _ours("lnet_nearest_rule"), None, _eval("lnet_nearest_rule")),
+        TableRow("Scripted oracle with GT poses (not learned)", _ours("oracle"), None, _eval("oracle")),
+    ]),
+    2: TableSpec(2, "With and without uncertainty (paper Table 2)", [
+        TableRow("Policy w/ GT poses (gt_pose)", _ours("gt_pose"), paper.TABLE2["Policy w/ GT poses"], _eval("gt_pose")),
+        TableRow("Policy w/o uncertainty (lnet_no_uncertainty)", _ours("lnet_no_uncertainty"),
+                 paper.TABLE2["Policy w/o uncertainty"], _eval("lnet_no_uncertainty")),
+        TableRow("Ours: policy + uncertainty (lnet)", _ours("lnet"), paper.TABLE2["Ours (Policy + uncertainty)"],
+                 _eval("lnet")),
+    ]),
+}
+
+
+def find_row(rows: list[dict[str, Any]], match: dict[str, Any]) -> dict[str, Any] | None:
+    """The results row whose fields equal ``match`` (and whose encoder is unset unless ``match`` names one)."""
+    wanted = {"encoder": None, **match}
+    for row in rows:
+        if all(row.get(key) == value for key, value in wanted.items()):
+            return row
+    return None
+
+
+def missing_rows(spec: TableSpec, rows: list[dict[str, Any]]) -> list[TableRow]:
+    return [line for line in spec.rows if find_row(rows, line.match) is None]
+
+
+def require_complete(spec: TableSpec, rows: list[dict[str, Any]]) -> None:
+    """ConfigError listing each row of ``spec`` missing from results.json and the command that produces it."""
+    missing = missing_rows(spec, rows)
+    if missing:
+        listed = "; ".join(f"{line.label} ({line.command})" for line in missing)
+        raise ConfigError(f"Table {spec.number}: no results for {listed}; run those, then mor eval results")
+
+
+def _cell(summary: dict[str, Any] | None) -> str:
+    if summary is None:
+        return "–"
+    low, high = summary["ci95"]
+    return f"{summary['mean']:.3f} ± {summary['std']:.3f} [{low:.3f}, {high:.3f}]"
+
+
+def _paper_cell(value: tuple[float, float] | None) -> str:
+    return "–" if value is None else f"{value[0]:.3f} ± {value[1]:.3f}"
+
+
+def _beats(ours: dict[str, Any] | None, theirs: tuple[float, float] | None, metric: str) -> str:
+    if ours is None or theirs is None:
+        return ""
+    better = ours["mean"] < theirs[0] if metric in LOWER_IS_BETTER else ours["mean"] > theirs[0]
+    return " ✓" if better else " ✗"
+
+
+def table_markdown(spec: TableSpec, rows: list[dict[str, Any]]) -> str:
+    """Markdown of one table: for each metric our cell (mean ± std over seeds [95% CI]) and the paper's."""
+    header = ["Method"] + [f"{METRIC_LABELS[m]} ours | paper" for m in METRIC_NAMES]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for line in spec.rows:
+        row = find_row(rows, line.match)
+        if row is None:
+            continue
+        cells = []
+        for k, metric in enumerate(METRIC_NAMES):
+            ours, theirs = row["metrics"].get(metric), line.paper[k] if line.paper else None
+            cells.append(f"{_cell(ours)}{_beats(ours, theirs, metric)} | {_paper_cell(theirs)}")
+        lines.append(f"| {line.label} | " + " | ".join(cells) + " |")
+    missing = missing_rows(spec, rows)
+    if missing:
+        lines.append("")
+        lines.append("Not yet run: " + "; ".join(f"{m.label} (`{m.command}`)" for m in missing) + ".")
+    return "\n".join(lines)
+
+
+def write_table_figure(spec: TableSpec, rows: list[dict[str, Any]], path: Path) -> Path | None:
+    """Grouped bars per metric: each of our rows (95% CI as error bars) beside the paper's (± its std)."""
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    from mor.atomic import atomic_output  # noqa: PLC0415
+
+    present = [(line, find_row(rows, line.match)) for line in spec.rows]
+    present = [(line, row) for line, row in present if row is not None]
+    if not present:
+        return None
+    bars = []
+    for line, row in present:
+        means = [row["metrics"][m]["mean"] for m in METRIC_NAMES]
+        errors = np.array([[row["metrics"][m]["mean"] - row["metrics"][m]["ci95"][0],
+                            row["metrics"][m]["ci95"][1] - row["metrics"][m]["mean"]] for m in METRIC_NAMES]).T
+        bars.append((f"ours: {line.label}", means, errors, None))
+        if line.paper:
+            bars.append((f"paper: {line.label}", [v[0] if v else np.nan for v in line.paper],
+                         np.array([v[1] if v else 0.0 for v in line.paper]), "//"))
+    figure, ax = plt.subplots(figsize=(11, 4.2))
+    width = 0.8 / len(bars)
+    x = np.arange(len(METRIC_NAMES))
+    for k, (label, means, errors, hatch) in enumerate(bars):
+        ax.bar(x + (k - (len(bars) - 1) / 2) * width, means, width, yerr=errors, label=label, hatch=hatch,
+               capsize=2, alpha=0.85 if hatch is None else 0.45)
+    ax.set_xticks(x, [METRIC_LABELS[m] for m in METRIC_NAMES])
+    ax.set_ylim(0, 1.05)
+    ax.set_title(f"Table {spec.number}: {spec.title}")
+    ax.legend(fontsize=7, ncol=2, loc="upper right")
+    ax.grid(axis="y", alpha=0.3)
+    figure.tight_layout()
+    with atomic_output(path) as partial:
+        figure.savefig(partial, dpi=110, format="png")
+    plt.close(figure)
+    return path
+
+
+def budget_line(rows: list[dict[str, Any]], spec: TableSpec) -> str:
+    """What the table's rows were trained and evaluated with, from the rows themselves."""
+    parts = []
+    for line in spec.rows:
+        row = find_row(rows, line.match)
+        if row is not None and row.get("train_steps"):
+            steps = ", ".join(f"{k} {v:,}" for k, v in row["train_steps"].items())
+            parts.append(f"{row['method']}: {steps}")
+    evaluated = {(tuple(r["seeds"]), r["episodes_per_seed"]) for r in rows}
+    protocol = "; ".join(f"{len(s)} seeds × {e} episodes per task" for s, e in sorted(evaluated))
+    return f"Evaluation: {protocol}. Training steps (decisions for the decision policy): " + ("; ".join(parts) or "–")
