@@ -7,35 +7,47 @@ from typing import Any
 from mor.config import Profile
 from mor.data.manifest import manifest_version, read_manifest
 from mor.errors import MorError
-from mor.lnet.evaluate import fit_calibration, metrics, predict
-from mor.lnet.params import ABLATIONS
 from mor.lnet.checkpoint import signature
+from mor.lnet.evaluate import fit_calibration, metrics, predict
+from mor.lnet.figures import write_since_seen
+from mor.lnet.params import ABLATIONS, TrainParams
 from mor.lnet.runtime import load_lnet
 from mor.lnet.train import BEST, pick_device, train
 from pipelines import paths
 from pipelines.io import write_json
 
 ABLATION = paths.DATASETS / "lnet_ablation"
+REPORTED = ("nll", "agent_position_error_m", "heading_error_deg", "object_position_error_m",
+            "object_error_by_steps_since_seen", "coverage")
 
 
 def run(profile: Profile, study: str, steps: int, episodes: int) -> dict[str, Any]:
     """Train each variant of ``study`` for ``steps`` steps (same seed, data and other parameters), calibrate each
-    on validation, score each on the first ``episodes`` test episodes; writes ``<ABLATION>/<study>/results.json``."""
+    on validation, score each on the first ``episodes`` test episodes; writes ``<ABLATION>/<study>/results.json``
+    and ``since_seen.png`` (median object error against frames since last seen, one line per variant)."""
     if study not in ABLATIONS:
         raise MorError(f"--study: unknown study {study!r}; choose one of {', '.join(ABLATIONS)}")
     version = manifest_version(read_manifest(paths.MANIFEST))
     device = pick_device()
-    params = profile.lnet.train.model_copy(update={"max_steps": steps, "patience": 10**6})
+    base = profile.lnet.train.model_copy(update={"max_steps": steps, "patience": 10**6})
     results: dict[str, Any] = {"study": study, "steps": steps, "test_episodes": episodes, "dataset_version": version}
     for name, overrides in ABLATIONS[study].items():
-        config = profile.lnet.model.model_copy(update=overrides)
+        params = base.model_copy(update={k: v for k, v in overrides.items() if k in TrainParams.model_fields})
+        config = profile.lnet.model.model_copy(update={k: v for k, v in overrides.items()
+                                                       if k not in TrainParams.model_fields})
         out = ABLATION / study / name
         summary = train(config, params, paths.LEROBOT / "train", paths.LEROBOT / "validation", out, version, device)
         model = load_lnet(out / BEST, device, signature(config, version, summary["image_size"]), calibrated=False).model
         calibration = fit_calibration(predict(model, paths.LEROBOT / "validation", episodes, device))
         scored = metrics(calibration.apply(predict(model, paths.LEROBOT / "test", episodes, device)))
-        results[name] = {key: scored[key] for key in ("nll", "agent_position_error_m", "heading_error_deg",
-                                                      "object_position_error_m", "coverage")}
-        results[name]["best_validation_loss"] = summary["best_validation_loss"]
-    write_json(ABLATION / study / "results.json", results)
+        results[name] = {key: scored[key] for key in REPORTED}
+        results[name].update(best_validation_loss=summary["best_validation_loss"], train_seconds=summary["seconds"],
+                             overrides=overrides)
+        write_json(ABLATION / study / "results.json", results)  # after each variant: a partial study is readable
+    curves = {name: results[name]["object_error_by_steps_since_seen"] for name in ABLATIONS[study]}
+    title = f"L-Net ablation '{study}' at {steps} steps: object error vs time since seen (test)"
+    write_since_seen(ABLATION / study / "since_seen.png", curves, title)
+    # The committed copy, which the model card shows (outside cards/lnet, which the eval stage rewrites whole).
+    write_json(paths.LNET_ABLATION_CARD / f"{study}.json", results)
+    write_since_seen(paths.LNET_ABLATION_CARD / f"{study}.png", curves, title)
     return results

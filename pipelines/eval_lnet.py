@@ -12,14 +12,20 @@ from mor.config import Profile
 from mor.data.manifest import manifest_version, read_manifest
 from mor.data.sequences import SequenceWindows
 from mor.lnet.card import read_json, render_model_card, write_model_card
-from mor.lnet.evaluate import metrics, predict
-from mor.lnet.figures import write_estimate_gif, write_estimate_strip, write_reliability_diagram
+from mor.lnet.evaluate import Predictions, metrics, predict, predict_live
+from mor.lnet.figures import (
+    write_estimate_gif,
+    write_estimate_strip,
+    write_reliability_diagram,
+    write_since_seen,
+)
 from mor.sim.arena import Arena
 from pipelines import paths
 from pipelines.io import write_json
 from pipelines.lnet_io import load_trained
 
 FIGURE_EPISODE = 0
+ORACLE_SEED = 1000  # episode seeds 1e9 + i: disjoint from the collection's (seed 0: 0 .. 1e6 - 1)
 
 
 def run(profile: Profile) -> dict[str, Any]:
@@ -27,13 +33,20 @@ def run(profile: Profile) -> dict[str, Any]:
     card.mkdir(parents=True, exist_ok=True)
     runner = load_trained(profile, paths.LNET / "model.pt")
     calibration = runner.calibration
+    manifest = read_manifest(paths.MANIFEST)
     predictions = predict(runner.model, paths.LEROBOT / "test", profile.lnet.eval_episodes, runner.device)
-    result = {
-        "dataset_version": manifest_version(read_manifest(paths.MANIFEST)),
-        "calibration": asdict(calibration),
-        "before_calibration": metrics(predictions),
-        "after_calibration": metrics(calibration.apply(predictions)),
-    }
+
+    def scored(p: Predictions) -> dict[str, Any]:
+        return {"before_calibration": metrics(p), "after_calibration": metrics(calibration.apply(p))}
+
+    result = {"dataset_version": manifest_version(manifest), "calibration": asdict(calibration), **scored(predictions)}
+    # Real runs of the test split (its episodes are numbered in manifest order), reported on their own.
+    test_sources = [row["source"] for row in manifest.to_pylist() if row["split"] == "test"]
+    real = np.isin(predictions.episode, [i for i, source in enumerate(test_sources) if source == "real"])
+    result["real"] = scored(predictions.select(real)) if real.any() else None
+    if profile.lnet.oracle_episodes:  # the episodes the policies will produce: oracle-driven, tracked live
+        live = predict_live(runner, profile.sim, "oracle", profile.lnet.oracle_episodes, ORACLE_SEED)
+        result["oracle"] = {"seed": ORACLE_SEED, **scored(live)}
     write_json(card / "metrics.json", result)
 
     reliability = {f"{name} ({when})": result[key]["reliability"][name]
@@ -54,12 +67,19 @@ def run(profile: Profile) -> dict[str, Any]:
     frames = np.linspace(0, len(images) - 1, 6).round().astype(int).tolist()
     write_estimate_strip(card / "estimates_strip.png", arena, truth, estimate, frames, images)
     write_estimate_gif(card / "estimates.gif", arena, truth, estimate, images, fps=5, every=2)
+    curves = {"test": result["after_calibration"]["object_error_by_steps_since_seen"]}
+    if "oracle" in result:
+        curves["oracle-driven"] = result["oracle"]["after_calibration"]["object_error_by_steps_since_seen"]
+    write_since_seen(card / "since_seen.png", curves, "L-Net object error against time since the object was seen")
+    ablation_path = paths.LNET_ABLATION_CARD / "tracker.json"
+    ablation = read_json(ablation_path) if ablation_path.is_file() else None
     shutil.copyfile(paths.LNET / "learning_curve.png", card / "learning_curve.png")
     shutil.copyfile(paths.LNET / "model.pt", card / "model.pt")
     shutil.copyfile(paths.LNET_CALIBRATION, card / "calibration.json")
     text = render_model_card(result, profile.lnet.model_dump(mode="json") | {"sim": profile.sim.model_dump()},
                              read_json(paths.LNET_CALIBRATION), read_json(paths.LNET / "train_summary.json"),
                              {"reliability": "reliability.png", "strip": "estimates_strip.png",
-                              "gif": "estimates.gif", "learning_curve": "learning_curve.png"})
+                              "gif": "estimates.gif", "learning_curve": "learning_curve.png",
+                              "since_seen": "since_seen.png", "ablation": "../lnet_ablation/tracker.png"}, ablation)
     write_model_card(card / "README.md", text)
     return result

@@ -18,6 +18,7 @@ EPISODE_FOLDERS = (EPISODES, REAL_EPISODES)
 LNET = DATASETS / "lnet"                  # training run: checkpoint.pt (resume), model.pt (best), log.csv
 LNET_CALIBRATION = LNET / "calibration.json"
 LNET_CARD = Path("cards/lnet")            # model card, committed weights, metrics and figures
+LNET_ABLATION_CARD = Path("cards/lnet_ablation")  # committed results of mor ablate-lnet, shown by the model card
 POLICIES = DATASETS / "policy"           # policy training runs: <variant>/<task>/ checkpoints, logs, TensorBoard
 POLICY_CARD = Path("cards/policy")        # committed policies: <variant>/<task>/policy.pth + meta.json, card, curves
 EVAL = DATASETS / "eval"                  # per-episode records: <method>.jsonl

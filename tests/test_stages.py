@@ -64,9 +64,35 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     _run("eval-lnet", "--profile", "tiny")
     card = workspace / "cards/lnet"
     metrics = json.loads((card / "metrics.json").read_text())
-    assert set(metrics) >= {"before_calibration", "after_calibration", "dataset_version"}
-    for name in ("README.md", "model.pt", "reliability.png", "estimates_strip.png", "estimates.gif"):
+    assert set(metrics) >= {"before_calibration", "after_calibration", "dataset_version", "oracle", "real"}
+    assert metrics["oracle"]["after_calibration"]["episodes"] == tiny["lnet"]["oracle_episodes"]
+    for name in ("README.md", "model.pt", "reliability.png", "estimates_strip.png", "estimates.gif", "since_seen.png"):
         assert (card / name).is_file(), name
+
+    # The policy half: every variant's policies (the L-Net ones on the tiny L-Net above), methods, tables, cards.
+    for variant in ("gt_pose", "lnet", "lnet_no_uncertainty"):
+        _run("policy", "train", "--variant", variant, "--profile", "tiny")
+        for task in ("pick", "drop", "decision"):
+            assert (workspace / f"cards/policy/{variant}/{task}/policy.pth").is_file(), (variant, task)
+    lnet_pick = json.loads((workspace / "cards/policy/lnet/pick/summary.json").read_text())
+    assert lnet_pick["warm_start"] and lnet_pick["steps"] == tiny["policy"]["lnet_steps"]["pick"]
+    for method in ("oracle", "gt_pose", "lnet", "lnet_no_uncertainty", "lnet_nearest_rule"):
+        _run("eval", "run", "--method", method, "--profile", "tiny")
+    records = (workspace / "datasets/eval/lnet.jsonl").read_text().splitlines()
+    protocol = tiny["evaluate"]
+    assert len(records) == 3 * len(protocol["seeds"]) * protocol["episodes"]
+    _run("eval", "results", "--profile", "tiny")
+    results = json.loads((workspace / "cards/results/results.json").read_text())
+    assert {r["method"] for r in results["rows"]} == {"oracle", "gt_pose", "lnet", "lnet_no_uncertainty",
+                                                       "lnet_nearest_rule"}
+    assert "| Ours: policy + uncertainty (lnet) |" in (workspace / "cards/results/README.md").read_text()
+    assert "Table 2" in _run("eval", "tables", "--table", "2")
+    missing = CliRunner().invoke(app, ["eval", "tables", "--table", "1"])
+    assert missing.exit_code == 2 and "mor eval run --method gt_pose_nearest_rule" in missing.output
+    _run("eval", "cards", "--profile", "tiny")
+    for variant in ("gt_pose", "lnet", "lnet_no_uncertainty"):
+        assert (workspace / f"cards/policy/{variant}/episode.mp4").stat().st_size > 0
+        assert "## Evaluation" in (workspace / f"cards/policy/{variant}/README.md").read_text()
 
 
 def test_validate_without_a_manifest_is_one_clear_line(workspace: Path) -> None:
@@ -79,4 +105,4 @@ def test_an_unknown_ablation_study_is_one_clear_line(workspace: Path) -> None:
     result = CliRunner().invoke(app, ["ablate-lnet", "--study", "colour"])
     assert result.exit_code == 2
     assert result.output.strip().splitlines() == [
-        "error: --study: unknown study 'colour'; choose one of actions, object_head"]
+        "error: --study: unknown study 'colour'; choose one of actions, object_head, tracker"]

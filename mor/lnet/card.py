@@ -12,62 +12,130 @@ from mor.atomic import atomic_output
 
 
 
-def _row(name: str, before: dict, after: dict, path: tuple[str, ...]) -> str:
-    def get(d: dict) -> float:
-        for key in path:
-            d = d[key]
-        return float(d)  # type: ignore[arg-type]
+_ERROR_ROWS = (("agent position (m)", ("agent_position_error_m",), 3),
+               ("heading (deg)", ("heading_error_deg",), 2),
+               ("objects in view now (m)", ("object_position_error_m", "visible"), 3),
+               ("objects seen earlier (m)", ("object_position_error_m", "seen"), 3),
+               ("objects not yet seen (m)", ("object_position_error_m", "unseen"), 3),
+               ("all objects (m)", ("object_position_error_m", "all"), 3))
+_COVERAGE_GROUPS = ("agent_position", "heading", "objects_visible", "objects_seen", "objects_unseen")
 
-    return f"| {name} | {get(before):.3f} | {get(after):.3f} |"
+
+def _get(d: dict, path: tuple[str, ...]) -> Any:
+    for key in path:
+        d = d.get(key, {}) if isinstance(d, dict) else {}
+    return d
+
+
+def _number(value: Any, digits: int) -> str:
+    return "–" if value is None or value == {} or value != value else f"{float(value):.{digits}f}"
+
+
+def error_table(block: dict[str, Any]) -> list[str]:
+    """Median / 90th percentile / count of each error of one ``metrics`` block, as Markdown rows."""
+    rows = ["| quantity | median | 90th percentile | frames |", "| --- | --- | --- | --- |"]
+    for name, path, digits in _ERROR_ROWS:
+        summary = _get(block, path)
+        rows.append(f"| {name} | {_number(summary.get('median'), digits)} | {_number(summary.get('p90'), digits)} | "
+                    f"{summary.get('count', '–')} |")
+    return rows
+
+
+def coverage_table(columns: dict[str, dict[str, Any]]) -> list[str]:
+    """The NLLs and the 1/2/3-sigma coverage of each group, one column per named ``metrics`` block."""
+    rows = [f"| metric | {' | '.join(columns)} |", "| --- |" + " --- |" * len(columns)]
+    for name in ("agent_position", "heading", "objects"):
+        rows.append(f"| NLL {name} | " + " | ".join(_number(_get(b, ("nll", name)), 3) for b in columns.values())
+                    + " |")
+    for group in _COVERAGE_GROUPS:
+        for k in (1, 2, 3):
+            rows.append(f"| coverage {group} {k}σ | " + " | ".join(
+                _number(_get(b, ("coverage", group, f"{k}sigma")), 3) for b in columns.values()) + " |")
+    return rows
+
+
+def ablation_table(results: dict[str, Any]) -> list[str]:
+    """One row per variant of an ``mor ablate-lnet`` study: the headline errors and coverage after calibration."""
+    rows = ["| variant | agent (m) | heading (deg) | objects in view (m) | objects seen earlier (m) | objects "
+            "unseen (m) | objects seen 1σ/2σ/3σ | NLL objects | train s |", "| --- |" + " --- |" * 8]
+    for name, r in results.items():
+        if not isinstance(r, dict) or "nll" not in r:
+            continue
+        errors = r["object_position_error_m"]
+        seen = "/".join(_number(r["coverage"]["objects_seen"][f"{k}sigma"], 2) for k in (1, 2, 3))
+        rows.append(f"| {name} | {r['agent_position_error_m']['median']:.3f} | {r['heading_error_deg']['median']:.2f}"
+                    f" | {_number(errors.get('visible', {}).get('median'), 3)} | {errors['seen']['median']:.3f} | "
+                    f"{_number(errors.get('unseen', {}).get('median'), 3)} | {seen} | {r['nll']['objects']:.3f} | "
+                    f"{_number(r.get('train_seconds'), 0)} |")
+    return rows
 
 
 def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibration: dict[str, Any],
-                      train_summary: dict[str, Any], figures: dict[str, str]) -> str:
-    """The card's text; every number comes from the dicts passed in (the stage's own outputs)."""
+                      train_summary: dict[str, Any], figures: dict[str, str],
+                      ablation: dict[str, Any] | None = None) -> str:
+    """The card's text; every number comes from the dicts passed in (the stage's own outputs, and the committed
+    results of ``mor ablate-lnet --study tracker`` when given)."""
     before, after = metrics["before_calibration"], metrics["after_calibration"]
+    tracker = params["model"].get("tracker", "lstm")
+    tracker_name = "LSTM" if tracker == "lstm" else "belief filter"
     front = {"license": "apache-2.0", "library_name": "pytorch", "tags": ["mor", "localization", "uncertainty",
-             "robotics", "lstm"], "datasets": [f"mor-dataset-{metrics['dataset_version']}"],
+             "robotics", tracker], "datasets": [f"mor-dataset-{metrics['dataset_version']}"],
              "pipeline_tag": "robotics"}
-    rows = [
-        _row("NLL agent position", before, after, ("nll", "agent_position")),
-        _row("NLL heading", before, after, ("nll", "heading")),
-        _row("NLL objects", before, after, ("nll", "objects")),
-    ]
-    for group in ("agent_position", "objects_seen", "heading"):
-        for k in (1, 2, 3):
-            rows.append(_row(f"coverage {group} {k}σ", before, after, ("coverage", group, f"{k}sigma")))
     nominal = before["coverage"]
-    errors = [
-        f"| agent position (m) | {before['agent_position_error_m']['median']:.3f} | "
-        f"{before['agent_position_error_m']['p90']:.3f} |",
-        f"| heading (deg) | {before['heading_error_deg']['median']:.2f} | {before['heading_error_deg']['p90']:.2f} |",
-        f"| objects seen earlier (m) | {before['object_position_error_m']['seen']['median']:.3f} | "
-        f"{before['object_position_error_m']['seen']['p90']:.3f} |",
-        f"| all objects (m) | {before['object_position_error_m']['all']['median']:.3f} | "
-        f"{before['object_position_error_m']['all']['p90']:.3f} |",
-    ]
+    oracle, real = metrics.get("oracle"), metrics.get("real")
+    seconds = train_summary.get("seconds")
     lines = [
         "---", yaml.safe_dump(front, sort_keys=False).strip(), "---", "",
-        "# MOR L-Net (PoseNet + LSTM)", "",
+        f"# MOR L-Net (PoseNet + {tracker_name})", "",
         "Estimates the robot's global position (bivariate Gaussian), heading (von Mises) and every object's position "
         "(bivariate Gaussians) from first-person RGB frames, the object class ids, the held-object index and "
-        f"{'the previous action' if params['model']['use_actions'] else 'no action input'} "
+        f"{'the previous action' if params['model']['use_actions'] or tracker == 'filter' else 'no action input'} "
         "(paper section 4.1; trained with the NLL of Eq. 5 plus the squared errors of the means, see "
-        "docs/assumptions.md).", "",
+        "docs/assumptions.md). "
+        + ("The tracker is the paper's LSTM." if tracker == "lstm" else
+           "The tracker is a differentiable world-frame Gaussian belief (`mor/lnet/filter.py`): a motion model "
+           "learned from the previous action corrected by the PoseNet's fix, and per object a belief that stays on "
+           "the floor, follows the agent while held, lands 1.5 m ahead on a drop, and is updated by the PoseNet's "
+           "measurement weighted by its predicted visibility behind a Mahalanobis gate.")
+        + (" The PoseNet has a visibility head (BCE) and its ego object NLL counts only frames where the object "
+           "is visible." if params["model"].get("visibility") else ""), "",
         f"- Dataset version: `{metrics['dataset_version']}`; test split: {before['episodes']} episodes, "
         f"{before['frames']} frames.",
-        f"- Training: {train_summary['steps']} steps on {train_summary['device']}, best validation loss "
-        f"{train_summary['best_validation_loss']:.3f}, early stop: {train_summary['stopped_early']}.",
+        f"- Training: {train_summary['steps']} steps on {train_summary['device']}"
+        + (f" ({seconds / 60:.1f} min wall time, {train_summary.get('torch_threads')} torch thread(s))"
+           if seconds else "")
+        + f", best validation loss {train_summary['best_validation_loss']:.3f}, early stop: "
+        f"{train_summary['stopped_early']}.",
         f"- Calibration (fitted on validation): agent σ × {calibration['agent_scale']:.3f}, objects σ × "
         f"{calibration['object_scale']:.3f}, κ × {calibration['kappa_scale']:.3f}.", "",
-        "## Errors on the test split (means of the LSTM's estimates)", "",
-        "| quantity | median | 90th percentile |", "| --- | --- | --- |", *errors, "",
-        "## Likelihood and coverage, before and after calibration", "",
+        "## Errors on the test split (random-action episodes; means of the tracker's estimates)", "",
+        *error_table(after), "",
+        "'In view now': visible by the simulator's rule on this frame; 'seen earlier': visible or held at or before "
+        "this frame; 'not yet seen': neither, so only the prior can answer.", "",
+    ]
+    if oracle:
+        lines += [f"## Errors on oracle-driven episodes ({oracle['after_calibration']['episodes']} Rearrange episodes, "
+                  f"{oracle['after_calibration']['frames']} frames, tracked live by the streaming step)", "",
+                  *error_table(oracle["after_calibration"]), ""]
+    if real:
+        lines += ["## Errors on real runs of the test split", "", *error_table(real["after_calibration"]), ""]
+    columns = {"test, before": before, "test, after": after}
+    if oracle:
+        columns["oracle, after"] = oracle["after_calibration"]
+    lines += [
+        "## Likelihood and coverage", "",
         f"Nominal coverage: 2-D {nominal['nominal_2d']['1sigma']:.3f} / {nominal['nominal_2d']['2sigma']:.3f} / "
         f"{nominal['nominal_2d']['3sigma']:.3f}; heading {nominal['nominal_heading']['1sigma']:.3f} / "
         f"{nominal['nominal_heading']['2sigma']:.3f} / {nominal['nominal_heading']['3sigma']:.3f}.", "",
-        "| metric | before | after |", "| --- | --- | --- |", *rows, "",
+        *coverage_table(columns), "",
         f"![reliability]({figures['reliability']})", "",
+        f"![error against time since seen]({figures['since_seen']})", "",
+    ]
+    if ablation:
+        lines += [f"## Ablation: tracker and visibility loss at an equal budget ({ablation['steps']} steps each, "
+                  f"first {ablation['test_episodes']} test episodes, after calibration)", "",
+                  *ablation_table(ablation), "", f"![ablation]({figures['ablation']})", ""]
+    lines += [
         "## What the estimates look like", "",
         "Ground truth as stars, estimated 2σ ellipses, the heading's 95% sector (grey):", "",
         f"![estimates]({figures['strip']})", "", f"Animated: [{figures['gif']}]({figures['gif']})", "",
@@ -82,7 +150,7 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
         "- Trained on random-action episodes of the MOR simulator; its uncertainty is honest only for that data "
         "distribution (check the coverage after calibration before trusting it elsewhere, e.g. on real runs).",
         "- Objects never seen in an episode can only be guessed from the arena's prior: their errors are large by "
-        "construction (see 'all objects').",
+        "construction (see 'not yet seen').",
         "- Encoder trained from scratch (no pretrained weights are reachable here).", "",
         "## Parameters", "", "```yaml", yaml.safe_dump(params, sort_keys=False).strip(), "```", "",
     ]

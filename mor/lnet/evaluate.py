@@ -11,19 +11,27 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch
 from scipy import optimize, stats
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
+import mor.sim  # noqa: F401 - registers the environments
+from mor.data.schema import MAX_OBJECTS
 from mor.data.sequences import SequenceWindows
-from mor.data.visibility import visible_per_frame
 from mor.lnet.calibration import Calibration
 from mor.lnet.likelihoods import gaussian_nll, log_i0, mahalanobis_squared, von_mises_nll
 from mor.lnet.model import LNet
+from mor.lnet.runtime import LNetRunner
 from mor.lnet.train import run_model, to_device
+from mor.sim.config import SimConfig
 from mor.sim.geometry import wrap_angle
+from mor.sim.rollout import episode_seed, make_policy
+from mor.sim.rules import visible
+
+LIVE_ENV = "MOR/Rearrange-v0"
 
 SIGMAS = (1, 2, 3)
 NOMINAL_2D = {k: float(1.0 - np.exp(-k * k / 2.0)) for k in SIGMAS}
@@ -33,11 +41,12 @@ RELIABILITY_LEVELS = np.linspace(0.05, 0.95, 19)
 
 @dataclass
 class Predictions:
-    """The LSTM's world-frame estimates and the truth, frame by frame over many episodes (N frames, K slots).
+    """The tracker's world-frame estimates and the truth, frame by frame over many episodes (N frames, K slots).
 
     agent_pose (N, 3) truth; agent_mean (N, 2); agent_tril (N, 2, 2); heading (N,); kappa (N,);
     object_truth (N, K, 2); object_mean (N, K, 2); object_tril (N, K, 2, 2); present (N, K) slot in use;
-    seen (N, K) the object was visible or held at or before this frame; episode (N,); frame (N,).
+    visible (N, K) in view now (``rules.visible``); since_seen (N, K) frames since the object was last visible or
+    held (0: now; -1: not yet in this episode); episode (N,); frame (N,).
     """
 
     agent_pose: np.ndarray
@@ -49,20 +58,45 @@ class Predictions:
     object_mean: np.ndarray
     object_tril: np.ndarray
     present: np.ndarray
-    seen: np.ndarray
+    visible: np.ndarray
+    since_seen: np.ndarray
     episode: np.ndarray
     frame: np.ndarray
+
+    @property
+    def seen(self) -> np.ndarray:
+        """(N, K) the object was visible or held at or before this frame."""
+        return self.since_seen >= 0
 
     def select(self, rows: np.ndarray) -> Predictions:
         return Predictions(*(getattr(self, f.name)[rows] for f in fields(self)))
 
 
-def seen_so_far(agent_pose: np.ndarray, objects: np.ndarray, held: np.ndarray, present: np.ndarray) -> np.ndarray:
-    """(T, K) whether each object was visible to the camera (``rules.visible``) or held at or before frame t."""
-    n = int(present.sum())
-    now = np.zeros(objects.shape[:2], dtype=bool)
-    now[:, :n] = visible_per_frame(agent_pose, objects[:, :n], held) | (held[:, None] == np.arange(n))
-    return np.maximum.accumulate(now, axis=0)
+def steps_since_seen(visible: np.ndarray, held: np.ndarray) -> np.ndarray:
+    """(T, K) frames since each object was last visible or held (0 on such a frame; -1 before the first).
+
+    visible (T, K) bool; held (T,) index or -1."""
+    now = visible | (held[:, None] == np.arange(visible.shape[1]))
+    t = np.arange(len(now))[:, None]
+    last = np.maximum.accumulate(np.where(now, t, -1), axis=0)
+    return np.where(last >= 0, t - last, -1)
+
+
+def episode_predictions(estimate: dict[str, np.ndarray], agent_pose: np.ndarray, object_positions: np.ndarray,
+                        held: np.ndarray, visible: np.ndarray, present: np.ndarray, episode: int) -> Predictions:
+    """One episode's ``Predictions`` from the tracker's estimates (``PoseEstimate.to_numpy`` of one episode,
+    (T, ...)) and the truth: agent_pose (T, 3), object_positions (T, K, 2), held (T,), visible (T, K), present (K,)."""
+    length = len(agent_pose)
+    return Predictions(
+        agent_pose=agent_pose, agent_mean=estimate["agent_mean"], agent_tril=estimate["agent_tril"],
+        heading=estimate["heading"], kappa=estimate["kappa"], object_truth=object_positions,
+        object_mean=estimate["object_mean"], object_tril=estimate["object_tril"],
+        present=np.broadcast_to(present, (length, len(present))), visible=visible,
+        since_seen=steps_since_seen(visible, held), episode=np.full(length, episode), frame=np.arange(length))
+
+
+def concatenate(parts: list[Predictions]) -> Predictions:
+    return Predictions(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(Predictions)))
 
 
 @torch.no_grad()
@@ -70,26 +104,84 @@ def predict(model: LNet, root: Path, max_episodes: int, device: torch.device, pr
     """Run the L-Net over whole episodes of the split at ``root`` (the first ``max_episodes``)."""
     episodes = SequenceWindows(root, window=None)
     count = min(max_episodes, len(episodes))
-    parts: dict[str, list[np.ndarray]] = {f.name: [] for f in fields(Predictions)}
     model.eval()
     loader = DataLoader(torch.utils.data.Subset(episodes, range(count)), batch_size=1)
+    parts = []
     for index, batch in enumerate(tqdm(loader, total=count, desc="predict", unit="ep", disable=not progress)):
         _, tracked, _ = run_model(model, to_device(batch, device))
-        estimate = {name: value[0] for name, value in tracked.to_numpy().items()}
-        truth = {name: batch[name][0].numpy() for name in ("agent_pose", "object_positions", "held")}
-        present = batch["object_mask"][0].numpy()
-        length = len(truth["agent_pose"])
-        parts["agent_pose"].append(truth["agent_pose"])
-        parts["object_truth"].append(truth["object_positions"])
-        parts["present"].append(np.broadcast_to(present, (length, len(present))))
-        parts["seen"].append(seen_so_far(truth["agent_pose"], truth["object_positions"], truth["held"], present))
-        parts["episode"].append(np.full(length, index))
-        parts["frame"].append(np.arange(length))
-        for name in ("agent_mean", "agent_tril", "heading", "kappa"):
-            parts[name].append(estimate[name])
-        parts["object_mean"].append(estimate["object_mean"])
-        parts["object_tril"].append(estimate["object_tril"])
-    return Predictions(**{name: np.concatenate(values) for name, values in parts.items()})
+        truth = {name: batch[name][0].numpy() for name in ("agent_pose", "object_positions", "held", "visible",
+                                                           "object_mask")}
+        parts.append(episode_predictions({name: value[0] for name, value in tracked.to_numpy().items()},
+                                         truth["agent_pose"], truth["object_positions"], truth["held"],
+                                         truth["visible"], truth["object_mask"], index))
+    return concatenate(parts)
+
+
+def predict_live(runner: LNetRunner, sim: SimConfig, policy: str, episodes: int, seed: int, n_envs: int = 8,
+                 horizon: int | None = None, progress: bool = True) -> Predictions:
+    """Run ``episodes`` Rearrange episodes driven by ``policy`` (``oracle`` or ``random``) in ``n_envs``
+    environments at once, tracked by the streaming step, with the truth from ``info`` and visibility by
+    ``rules.visible``; episode ``i`` starts from ``reset(seed=episode_seed(seed, i))``. horizon: the env's
+    (None: Rearrange's own, 1000 steps)."""
+    envs = [gym.make(LIVE_ENV, horizon=horizon, **sim.model_dump()) for _ in range(min(n_envs, episodes))]
+    policies = [make_policy(policy, env, seed + i) for i, env in enumerate(envs)]
+    next_episode, parts = 0, []
+    records: list[dict[str, list] | None] = [None] * len(envs)
+    observations: list[dict] = [{}] * len(envs)
+    infos: list[dict] = [{}] * len(envs)
+    state, previous = runner.initial_state(len(envs)), np.full(len(envs), -1)
+    bar = tqdm(total=episodes, desc=f"predict ({policy})", unit="ep", disable=not progress)
+
+    def start(i: int) -> None:
+        nonlocal next_episode
+        if hasattr(policies[i], "reset"):
+            policies[i].reset()
+        observations[i], infos[i] = envs[i].reset(seed=episode_seed(seed, next_episode))
+        records[i] = {"index": next_episode, "estimates": [], "truth": []}
+        next_episode += 1
+
+    for i in range(len(envs)):
+        start(i)
+    while any(r is not None for r in records):
+        tracked, state = runner.track(np.stack([o["image"] for o in observations]),
+                                      np.stack([o["object_classes"] for o in observations]),
+                                      np.array([o["held"] for o in observations]), previous, state)
+        estimate = tracked.to_numpy()
+        done = np.zeros(len(envs), dtype=bool)
+        for i, env in enumerate(envs):
+            record = records[i]
+            if record is None:
+                continue  # this env has no episode left; its frames are ignored
+            world = env.unwrapped.state
+            record["estimates"].append({name: value[i, 0] for name, value in estimate.items()})
+            record["truth"].append((infos[i]["agent_pose"], infos[i]["object_positions"], infos[i]["held"],
+                                    [visible(world, k) for k in range(world.n_objects)]))
+            if record.get("ended"):  # its last frame (after the last action) is recorded too, as in the dataset
+                parts.append(_live_episode(record))
+                bar.update(1)
+                records[i], done[i], previous[i] = None, True, -1
+                if next_episode < episodes:
+                    start(i)
+                continue
+            action = policies[i](observations[i], infos[i])
+            observations[i], _, terminated, truncated, infos[i] = env.step(action)
+            previous[i] = action
+            record["ended"] = terminated or truncated
+        state = runner.reset(state, done)
+    bar.close()
+    for env in envs:
+        env.close()
+    return concatenate(sorted(parts, key=lambda p: p.episode[0]))
+
+
+def _live_episode(record: dict[str, Any]) -> Predictions:
+    """A finished live episode's records -> ``Predictions`` with the objects padded to MAX_OBJECTS slots."""
+    estimate = {name: np.stack([e[name] for e in record["estimates"]]) for name in record["estimates"][0]}
+    poses, objects, held, seen_now = (np.asarray(column) for column in zip(*record["truth"], strict=True))
+    n = objects.shape[1]
+    pad = ((0, 0), (0, MAX_OBJECTS - n))
+    return episode_predictions(estimate, poses, np.pad(objects, (*pad, (0, 0))), held,
+                               np.pad(seen_now.astype(bool), pad), np.arange(MAX_OBJECTS) < n, record["index"])
 
 
 # ---- calibration ------------------------------------------------------------------------------------------------
@@ -131,6 +223,23 @@ def _summary(values: np.ndarray) -> dict[str, float]:
     return {"median": float(np.median(values)), "p90": float(np.percentile(values, 90)), "count": int(len(values))}
 
 
+#: Bins of "frames since the object was last visible or held": [low, high) edges; the last is open.
+SINCE_SEEN_BINS = (0, 1, 2, 4, 8, 16, 32, 64, 128)
+
+
+def error_by_steps_since_seen(predictions: Predictions) -> dict[str, list]:
+    """Median object position error (m) per bin of frames since the object was last visible or held
+    (``SINCE_SEEN_BINS``); objects not yet seen are left out."""
+    p = predictions
+    error = np.linalg.norm(p.object_truth - p.object_mean, axis=-1)
+    since = np.where(p.present, p.since_seen, -1)
+    edges = [*SINCE_SEEN_BINS, np.inf]
+    rows = [(since >= low) & (since < high) for low, high in zip(edges[:-1], edges[1:], strict=True)]
+    return {"bin_start": list(SINCE_SEEN_BINS), "median_m": [float(np.median(error[r])) if r.any() else None
+                                                             for r in rows],
+            "count": [int(r.sum()) for r in rows]}
+
+
 def metrics(predictions: Predictions) -> dict[str, Any]:
     """NLL, errors, k-sigma coverage and reliability curves of ``predictions`` (JSON-ready)."""
     p = predictions
@@ -139,7 +248,9 @@ def metrics(predictions: Predictions) -> dict[str, Any]:
     object_d2 = _d2(p.object_truth, p.object_mean, p.object_tril)
     heading_error = np.abs(wrap_angle(p.agent_pose[:, 2] - p.heading))
     heading_mass = heading_central_mass(heading_error, p.kappa)
-    seen = p.present & p.seen
+    groups = {"seen": p.present & p.seen, "all": p.present, "visible": p.present & p.visible,
+              "unseen": p.present & ~p.seen}  # seen: at or before this frame; visible: now; unseen: not yet
+    seen = groups["seen"]
     object_error = np.linalg.norm(p.object_truth - p.object_mean, axis=-1)
     nll = {
         "agent_position": float(gaussian_nll(as_t(p.agent_pose[:, :2]), as_t(p.agent_mean), as_t(p.agent_tril)).mean()),
@@ -149,8 +260,8 @@ def metrics(predictions: Predictions) -> dict[str, Any]:
     }
     coverage = {
         "agent_position": {f"{k}sigma": float(np.mean(agent_d2 <= k * k)) for k in SIGMAS},
-        "objects_seen": {f"{k}sigma": float(np.mean(object_d2[seen] <= k * k)) for k in SIGMAS},
-        "objects_all": {f"{k}sigma": float(np.mean(object_d2[p.present] <= k * k)) for k in SIGMAS},
+        **{f"objects_{name}": {f"{k}sigma": float(np.mean(object_d2[rows] <= k * k)) if rows.any() else float("nan")
+                               for k in SIGMAS} for name, rows in groups.items()},
         "heading": {f"{k}sigma": float(np.mean(heading_mass <= NOMINAL_1D[k])) for k in SIGMAS},
         "nominal_2d": {f"{k}sigma": NOMINAL_2D[k] for k in SIGMAS},
         "nominal_heading": {f"{k}sigma": NOMINAL_1D[k] for k in SIGMAS},
@@ -168,7 +279,8 @@ def metrics(predictions: Predictions) -> dict[str, Any]:
         "nll": nll,
         "agent_position_error_m": _summary(np.linalg.norm(p.agent_pose[:, :2] - p.agent_mean, axis=-1)),
         "heading_error_deg": _summary(np.rad2deg(heading_error)),
-        "object_position_error_m": {"seen": _summary(object_error[seen]), "all": _summary(object_error[p.present])},
+        "object_position_error_m": {name: _summary(object_error[rows]) for name, rows in groups.items()},
+        "object_error_by_steps_since_seen": error_by_steps_since_seen(p),
         "coverage": coverage,
         "reliability": reliability,
     }

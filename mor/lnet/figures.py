@@ -367,3 +367,30 @@ def write_learning_curve(path: Path, log_rows: list[dict[str, Any]], title: str 
                          key: str = "loss") -> Path:
     """Write ``learning_curve_figure`` as a PNG (through a partial name); returns ``path``."""
     return write_png(Path(path), render(learning_curve_figure(log_rows, title, key)))
+
+
+def since_seen_figure(curves: Mapping[str, Mapping[str, Sequence[Any]]], title: str) -> Figure:
+    """Median object error (m) against frames since the object was last visible or held, one line per entry of
+    ``curves`` (each an ``evaluate.error_by_steps_since_seen`` result); bins without frames are left out."""
+    if not curves:
+        raise ValueError("since-seen: no curve given")
+    figure = Figure(figsize=(6.0, 4.0), dpi=DPI, layout="constrained")
+    ax = figure.add_subplot()
+    for name, curve in curves.items():
+        points = [(start, median) for start, median in zip(curve["bin_start"], curve["median_m"], strict=True)
+                  if median is not None]
+        ax.plot([start + 1 for start, _ in points], [median for _, median in points], marker="o", label=name)
+    ax.set_xscale("log")
+    starts = list(next(iter(curves.values()))["bin_start"])
+    ax.set_xticks([start + 1 for start in starts], [str(start) for start in starts])
+    ax.set_xlabel("frames since the object was last visible or held (bin start)")
+    ax.set_ylabel("median position error (m)")
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    return figure
+
+
+def write_since_seen(path: Path, curves: Mapping[str, Mapping[str, Sequence[Any]]], title: str) -> Path:
+    """Write ``since_seen_figure`` as a PNG (through a partial name); returns ``path``."""
+    return write_png(Path(path), render(since_seen_figure(curves, title)))

@@ -1,20 +1,31 @@
-"""The training loss: the sum of the negative log-likelihoods of paper Eq. 5, for the PoseNet and the LSTM."""
+"""The training loss: the negative log-likelihoods of paper Eq. 5 for the PoseNet and the tracker, plus the means'
+errors, and with ``visibility`` the PoseNet's visibility BCE and its ego object terms only where the object is in
+view."""
 
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 
 from mor.lnet.frames import world_to_ego
 from mor.lnet.likelihoods import gaussian_nll, von_mises_nll
 from mor.lnet.model import PoseEstimate
 
 
-def nll_terms(estimate: PoseEstimate, agent_pose: torch.Tensor, object_positions: torch.Tensor,
-              object_mask: torch.Tensor) -> dict[str, torch.Tensor]:
-    """Mean NLL of the agent position, the heading and the present objects' positions, plus the means' errors.
+def _masked_mean(values: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    mask = mask.to(values.dtype).expand_as(values)
+    return (values * mask).sum() / mask.sum().clamp(min=1.0)
 
-    agent_pose (..., 3) world [x, y, theta]; object_positions (..., K, 2) world; object_mask (..., K) or (B, K)
+
+def nll_terms(estimate: PoseEstimate, agent_pose: torch.Tensor, object_positions: torch.Tensor,
+              object_mask: torch.Tensor, beta: float = 0.0) -> dict[str, torch.Tensor]:
+    """Mean NLL of the agent position, the heading and the masked objects' positions, plus the means' errors.
+
+    agent_pose (..., 3) world [x, y, theta]; object_positions (..., K, 2) world; object_mask (..., K) or (B, 1, K)
     broadcastable. Ego-frame estimates are scored against the labels moved into the true ego frame.
+    beta > 0: the objects' NLL is the beta-NLL (Seitzer et al., ICLR 2022): each term weighted by the
+    stop-gradient generalized variance det(Sigma)^(beta/2), so that well-fitted means are not traded for wide
+    variances.
 
     The error terms (squared metres, 1 - cos of the heading error) keep the means learning while the stated
     uncertainty is still wide: the NLL's gradient on a von Mises mean is kappa * sin(error), which vanishes when
@@ -24,27 +35,46 @@ def nll_terms(estimate: PoseEstimate, agent_pose: torch.Tensor, object_positions
     if estimate.frame == "ego":
         targets = world_to_ego(object_positions, agent_pose[..., :2], agent_pose[..., 2])
     per_object = gaussian_nll(targets, estimate.object_mean, estimate.object_tril)
-    mask = object_mask.to(per_object.dtype).expand_as(per_object)
+    if beta > 0:
+        diagonal = torch.diagonal(estimate.object_tril, dim1=-2, dim2=-1)
+        per_object = per_object * (diagonal[..., 0] * diagonal[..., 1]).detach() ** beta
     object_error = (targets - estimate.object_mean).pow(2).sum(-1)
     return {
         "agent": gaussian_nll(agent_pose[..., :2], estimate.agent_mean, estimate.agent_tril).mean(),
         "heading": von_mises_nll(agent_pose[..., 2], estimate.heading, estimate.kappa).mean(),
-        "objects": (per_object * mask).sum() / mask.sum().clamp(min=1.0),
+        "objects": _masked_mean(per_object, object_mask),
         "agent_error": (agent_pose[..., :2] - estimate.agent_mean).pow(2).sum(-1).mean(),
         "heading_error": (1.0 - torch.cos(agent_pose[..., 2] - estimate.heading)).mean(),
-        "objects_error": (object_error * mask).sum() / mask.sum().clamp(min=1.0),
+        "objects_error": _masked_mean(object_error, object_mask),
     }
 
 
-def lnet_loss(single: PoseEstimate, tracked: PoseEstimate, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict]:
-    """Total loss (PoseNet terms + LSTM terms) and its parts as floats, for logging."""
-    mask = batch["object_mask"].unsqueeze(1)
+def lnet_loss(single: PoseEstimate, tracked: PoseEstimate, batch: dict[str, torch.Tensor],
+              beta: float = 0.0) -> tuple[torch.Tensor, dict]:
+    """Total loss (PoseNet terms + tracker terms) and its parts as floats, for logging.
+
+    The tracker is scored on every present object on every frame (its belief must be honest when unseen too).
+    With a visibility head (``single.visibility_logit``), the PoseNet adds the visibility BCE over present objects
+    and scores its ego object terms only on frames where the object is visible (``batch["visible"]``).
+    """
+    present = batch["object_mask"].unsqueeze(1)
+    posenet_mask = present
+    extra = {}
+    if single.visibility_logit is not None:
+        visible = batch["visible"] & present
+        posenet_mask = visible
+        extra["posenet_visibility"] = _masked_mean(F.binary_cross_entropy_with_logits(
+            single.visibility_logit, visible.to(single.visibility_logit.dtype), reduction="none"), present)
     parts = {}
     total = torch.zeros((), device=batch["agent_pose"].device)
-    for name, estimate in (("posenet", single), ("lstm", tracked)):
-        for term, value in nll_terms(estimate, batch["agent_pose"], batch["object_positions"], mask).items():
+    for name, estimate, mask, b in (("posenet", single, posenet_mask, beta), ("tracker", tracked, present, 0.0)):
+        terms = nll_terms(estimate, batch["agent_pose"], batch["object_positions"], mask, b)
+        for term, value in terms.items():
             parts[f"{name}_{term}"] = float(value.detach())
             total = total + value
+    for term, value in extra.items():
+        parts[term] = float(value.detach())
+        total = total + value
     return total, parts
 
 

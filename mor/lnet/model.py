@@ -1,7 +1,7 @@
 """The L-Net: a PoseNet f(o_t, c) per frame and an LSTM g(h_t, s_ego_t) over time (paper section 4.1).
 
 Shapes: B batch, T time, K = 5 object slots (absent slots have class -1 and are masked), images (3, H, W) in
-[0, 1]. Positions in metres, angles in radians; world frame and ego frame as in DESIGN.md.
+[0, 1]. Positions in metres, angles in radians; world frame and ego frame as in docs/design.md.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import torch
 from torch import nn
 
 from mor.data.schema import MAX_OBJECTS
+from mor.lnet.filter import BeliefFilter, cholesky_2x2
 from mor.lnet.frames import ego_to_world
 from mor.lnet.likelihoods import MIN_KAPPA, positive, scale_tril
 from mor.lnet.params import LNetConfig
@@ -20,6 +21,7 @@ from mor.sim.rules import N_ACTIONS
 K = MAX_OBJECTS
 _ABSENT = N_CLASSES  # embedding index of an absent slot
 _NO_ACTION = N_ACTIONS  # one-hot index of "no previous action"
+_FIELDS = ("agent_mean", "agent_tril", "heading", "kappa", "object_mean", "object_tril")  # of a PoseEstimate
 
 
 @dataclass
@@ -27,7 +29,7 @@ class PoseEstimate:
     """Distributions over poses; leading dims (...) are (B, T) or (N,).
 
     agent_mean (..., 2) world; agent_tril (..., 2, 2); heading (...) and kappa (...) of a von Mises;
-    object_mean (..., K, 2), object_tril (..., K, 2, 2) in ``frame`` ("ego" for the PoseNet, "world" for the LSTM).
+    object_mean (..., K, 2), object_tril (..., K, 2, 2) in ``frame`` ("ego" for the PoseNet, "world" for the tracker).
     """
 
     agent_mean: torch.Tensor
@@ -37,10 +39,10 @@ class PoseEstimate:
     object_mean: torch.Tensor
     object_tril: torch.Tensor
     frame: str
+    visibility_logit: torch.Tensor | None = None  # (..., K), the PoseNet's, when the config asks for visibility
 
     def to_numpy(self) -> dict[str, object]:
-        return {name: getattr(self, name).detach().cpu().numpy() for name in
-                ("agent_mean", "agent_tril", "heading", "kappa", "object_mean", "object_tril")}
+        return {name: getattr(self, name).detach().cpu().numpy() for name in _FIELDS}
 
 
 def _mlp(inputs: int, hidden: int, outputs: int) -> nn.Sequential:
@@ -136,7 +138,7 @@ class PoseNet(nn.Module):
         if config.object_head == "attention":
             self.attention = ObjectAttention(encoder.channels, config.class_embedding_dim)
             object_inputs += encoder.channels
-        self.object_head = _mlp(object_inputs, config.mlp_hidden, 5)
+        self.object_head = _mlp(object_inputs, config.mlp_hidden, 6 if config.visibility else 5)
 
     def forward(self, images: torch.Tensor, classes: torch.Tensor) -> PoseEstimate:
         """images (N, 3, H, W), classes (N, K) -> PoseEstimate with leading dim N (objects in the ego frame)."""
@@ -147,7 +149,8 @@ class PoseNet(nn.Module):
         if self.attention is not None:
             object_inputs.append(self.attention(spatial, embedded))
         raw = self.object_head(torch.cat(object_inputs, -1))
-        return PoseEstimate(mean, tril, heading, kappa, raw[..., :2], scale_tril(raw[..., 2:5]), "ego")
+        visibility = raw[..., 5] if raw.shape[-1] > 5 else None
+        return PoseEstimate(mean, tril, heading, kappa, raw[..., :2], scale_tril(raw[..., 2:5]), "ego", visibility)
 
 
 def _summary(estimate: PoseEstimate) -> torch.Tensor:
@@ -161,53 +164,70 @@ def _summary(estimate: PoseEstimate) -> torch.Tensor:
     return torch.cat([agent, objects], -1)
 
 
-class LNet(nn.Module):
-    """PoseNet per frame, then an LSTM over the episode -> world-frame estimates of the agent and all objects.
+TrackerState = tuple[torch.Tensor, ...]
 
-    LSTM input per step: the PoseNet summary, the ego object estimates projected to the world with the PoseNet's
-    agent estimate, which slots are present, which object is held (observed), and optionally the previous action.
+
+class LNet(nn.Module):
+    """PoseNet per frame, then a tracker over the episode -> world-frame estimates of the agent and all objects.
+
+    ``tracker: lstm`` (the paper's): an LSTM whose input per step is the PoseNet summary, the ego object estimates
+    projected to the world with the PoseNet's agent estimate, which slots are present, which object is held
+    (observed), optionally the previous action, and with ``visibility`` the predicted visibilities.
+    ``tracker: filter``: the Gaussian belief of ``mor.lnet.filter``.
     """
 
     def __init__(self, config: LNetConfig) -> None:
         super().__init__()
         self.config = config
         self.posenet = PoseNet(config)
-        inputs = (8 + 5 * K) + 2 * K + K + (K + 1) + ((N_ACTIONS + 1) if config.use_actions else 0)
-        self.lstm = nn.LSTM(inputs, config.lstm_hidden, batch_first=True)
-        self.head = nn.Linear(config.lstm_hidden, 8 + 5 * K)
+        if config.tracker == "lstm":
+            inputs = ((8 + 5 * K) + 2 * K + K + (K + 1) + ((N_ACTIONS + 1) if config.use_actions else 0)
+                      + (K if config.visibility else 0))
+            self.lstm = nn.LSTM(inputs, config.lstm_hidden, batch_first=True)
+            self.head = nn.Linear(config.lstm_hidden, 8 + 5 * K)
+        else:
+            self.filter = BeliefFilter(K)
 
-    def initial_state(self, n: int, device: torch.device | str = "cpu") -> tuple[torch.Tensor, torch.Tensor]:
-        """The state at the start of ``n`` episodes: zero LSTM (h, c), each (1, n, lstm_hidden)."""
-        zeros = torch.zeros(1, n, self.config.lstm_hidden, device=device)
-        return zeros, zeros.clone()
+    @property
+    def _batch_dim(self) -> int:
+        return 1 if self.config.tracker == "lstm" else 0  # the LSTM's (h, c) are (layers, B, hidden)
 
-    @staticmethod
-    def reset_state(state: tuple[torch.Tensor, torch.Tensor], done: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """``state`` with the episodes where ``done`` (n,) bool is True back at their start."""
-        keep = (~done).to(state[0].dtype)[None, :, None]
-        return state[0] * keep, state[1] * keep
+    def initial_state(self, n: int, device: torch.device | str = "cpu") -> TrackerState:
+        """The tracker's state at the start of ``n`` episodes: zero LSTM (h, c), each (1, n, lstm_hidden), or the
+        filter's prior belief (``mor.lnet.filter.FilterState``)."""
+        if self.config.tracker == "lstm":
+            zeros = torch.zeros(1, n, self.config.lstm_hidden, device=device)
+            return zeros, zeros.clone()
+        return self.filter.initial_state(n, device)
 
-    @staticmethod
-    def select_state(
-        state: tuple[torch.Tensor, torch.Tensor], other: tuple[torch.Tensor, torch.Tensor], take_other: torch.Tensor
-    ) -> tuple[torch.Tensor, torch.Tensor]:
+    def select_state(self, state: TrackerState, other: TrackerState, take_other: torch.Tensor) -> TrackerState:
         """Per episode, ``other``'s state where ``take_other`` (n,) bool is True, else ``state``'s."""
-        mask = take_other[None, :, None]
-        return torch.where(mask, other[0], state[0]), torch.where(mask, other[1], state[1])
+        def pick(mine: torch.Tensor, theirs: torch.Tensor) -> torch.Tensor:
+            shape = [1] * mine.dim()
+            shape[self._batch_dim] = -1
+            return torch.where(take_other.view(shape), theirs, mine)
+
+        return tuple(pick(mine, theirs) for mine, theirs in zip(state, other, strict=True))
+
+    def reset_state(self, state: TrackerState, done: torch.Tensor) -> TrackerState:
+        """``state`` with the episodes where ``done`` (n,) bool is True back at their start."""
+        return self.select_state(state, self.initial_state(len(done), done.device), done)
 
     def forward(
         self, images: torch.Tensor, classes: torch.Tensor, held: torch.Tensor, previous_actions: torch.Tensor,
-        state: tuple[torch.Tensor, torch.Tensor] | None = None,
-    ) -> tuple[PoseEstimate, PoseEstimate, tuple[torch.Tensor, torch.Tensor]]:
+        state: TrackerState | None = None,
+    ) -> tuple[PoseEstimate, PoseEstimate, TrackerState]:
         """images (B, T, 3, H, W); classes (B, K); held (B, T) index or -1; previous_actions (B, T) the action
-        taken before each frame (-1 at an episode's start). Returns (per-frame PoseNet estimates, LSTM estimates,
-        LSTM state), both estimates with leading dims (B, T)."""
+        taken before each frame (-1 at an episode's start). Returns (per-frame PoseNet estimates, the tracker's
+        world-frame estimates, the tracker's state), both estimates with leading dims (B, T)."""
         b, t = images.shape[:2]
         frame_classes = classes.unsqueeze(1).expand(-1, t, -1).reshape(b * t, K)
-        single = self.posenet(images.flatten(0, 1), frame_classes)
-        single = PoseEstimate(*(getattr(single, n).unflatten(0, (b, t)) for n in
-                                ("agent_mean", "agent_tril", "heading", "kappa", "object_mean", "object_tril")),
-                              frame="ego")
+        flat = self.posenet(images.flatten(0, 1), frame_classes)
+        visibility = None if flat.visibility_logit is None else flat.visibility_logit.unflatten(0, (b, t))
+        single = PoseEstimate(*(getattr(flat, n).unflatten(0, (b, t)) for n in _FIELDS), frame="ego",
+                              visibility_logit=visibility)
+        if self.config.tracker == "filter":
+            return (single, *self._filter(single, held, previous_actions, state))
         projected = ego_to_world(single.object_mean, single.agent_mean, single.heading).flatten(-2)
         present = (classes >= 0).float().unsqueeze(1).expand(-1, t, -1)
         held_one_hot = nn.functional.one_hot(torch.where(held >= 0, held, torch.full_like(held, K)), K + 1).float()
@@ -215,9 +235,28 @@ class LNet(nn.Module):
         if self.config.use_actions:
             actions = torch.where(previous_actions >= 0, previous_actions, torch.full_like(previous_actions, _NO_ACTION))
             inputs.append(nn.functional.one_hot(actions, N_ACTIONS + 1).float())
+        if visibility is not None:
+            inputs.append(torch.sigmoid(visibility))
         hidden, state = self.lstm(torch.cat(inputs, -1), state)
         raw = self.head(hidden)
         mean, tril, heading, kappa = _agent_distribution(raw[..., :8])
         objects = raw[..., 8:].unflatten(-1, (K, 5))
         tracked = PoseEstimate(mean, tril, heading, kappa, objects[..., :2], scale_tril(objects[..., 2:5]), "world")
         return single, tracked, state
+
+    def _filter(self, single: PoseEstimate, held: torch.Tensor, previous_actions: torch.Tensor,
+                state: TrackerState | None) -> tuple[PoseEstimate, TrackerState]:
+        """The belief filter over the T frames of ``single`` -> (world-frame estimates (B, T, ...), last state)."""
+        b, t = held.shape
+        state = self.filter.initial_state(b, held.device) if state is None else state
+        visibility = None if single.visibility_logit is None else torch.sigmoid(single.visibility_logit)
+        outputs = []
+        for i in range(t):
+            state = self.filter.step(
+                state, (single.agent_mean[:, i], single.agent_tril[:, i], single.heading[:, i], single.kappa[:, i]),
+                (single.object_mean[:, i], single.object_tril[:, i]), None if visibility is None else visibility[:, i],
+                held[:, i], previous_actions[:, i])
+            agent, agent_cov, heading, heading_var, objects, object_cov, _ = state
+            outputs.append((agent, cholesky_2x2(agent_cov), heading,
+                            (1.0 / heading_var).clamp(min=MIN_KAPPA), objects, cholesky_2x2(object_cov)))
+        return PoseEstimate(*(torch.stack(parts, 1) for parts in zip(*outputs, strict=True)), frame="world"), state

@@ -18,6 +18,13 @@ class LNetConfig(BaseModel):
     mlp_hidden: int = Field(256, ge=8)
     lstm_hidden: int = Field(256, ge=8)
     use_actions: bool = Field(True, description="feed the previous action to the LSTM (our addition)")
+    tracker: Literal["lstm", "filter"] = Field(
+        "lstm", description="lstm: the paper's LSTM over PoseNet summaries; filter: a differentiable world-frame "
+                            "Gaussian belief (mor.lnet.filter, our addition)")
+    visibility: bool = Field(
+        False, description="a per-object visibility head on the PoseNet (BCE against the dataset's "
+                           "state.object_visible), its ego object NLL scored only where the object is visible, and "
+                           "the tracker's measurement weighted by the predicted visibility (our addition)")
     object_head: Literal["global", "attention"] = Field(
         "global", description="object positions from the image's global feature (the paper's MLP) or from the "
                               "cells of the encoder's map that each object's class attends to (our addition)")
@@ -39,6 +46,8 @@ class TrainParams(BaseModel):
     validation_windows: int = Field(256, ge=1, description="fixed subset of validation windows per evaluation")
     patience: int = Field(4, ge=1, description="evaluations without improvement before stopping")
     num_workers: int = Field(1, ge=0)
+    beta_nll: float = Field(0.0, ge=0.0, le=1.0, description="beta of the beta-NLL (Seitzer et al. 2022) on the "
+                            "PoseNet's object terms: each NLL weighted by the stop-gradient variance^beta; 0: NLL")
     seed: int = 0
 
 
@@ -59,10 +68,20 @@ class LNetParams(BaseModel):
     train: TrainParams = Field(default_factory=TrainParams)
     calibration: CalibrationParams = Field(default_factory=CalibrationParams)
     eval_episodes: int = Field(200, ge=1, description="test episodes evaluated (all of them if fewer)")
+    oracle_episodes: int = Field(50, ge=0, description="oracle-driven Rearrange episodes evaluated live (0: none)")
 
 
 # `mor ablate-lnet --study NAME`: named variants of the profile's LNetConfig, trained and scored at equal budgets.
 ABLATIONS: dict[str, dict[str, dict[str, object]]] = {
     "actions": {"with_actions": {"use_actions": True}, "without_actions": {"use_actions": False}},
     "object_head": {"global": {"object_head": "global"}, "attention": {"object_head": "attention"}},
+    # Issue 10: which tracker, and whether the visibility head and the visible-only ego loss earn their place.
+    # A key of TrainParams (beta_nll) overrides the training parameters instead.
+    "tracker": {
+        "lstm": {"tracker": "lstm", "visibility": False},
+        "lstm_visibility": {"tracker": "lstm", "visibility": True},
+        "filter": {"tracker": "filter", "visibility": False},
+        "filter_visibility": {"tracker": "filter", "visibility": True},
+        "filter_visibility_beta": {"tracker": "filter", "visibility": True, "beta_nll": 0.5},
+    },
 }

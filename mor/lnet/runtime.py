@@ -107,13 +107,9 @@ class LNetRunner:
                                       f"(-1 at an episode's start), got {previous_actions.tolist()}")
 
     @torch.inference_mode()
-    def step(self, images: np.ndarray, object_classes: np.ndarray, held: np.ndarray, previous_actions: np.ndarray,
-             state: StreamState) -> tuple[Estimates, StreamState]:
-        """One frame of each of N environments -> (calibrated estimates, the next state); one forward pass.
-
-        images (N, H, W, 3) uint8; object_classes (N, n); held (N,) environment convention (n: none);
-        previous_actions (N,) the action taken before this frame, -1 at an episode's start.
-        """
+    def track(self, images: np.ndarray, object_classes: np.ndarray, held: np.ndarray, previous_actions: np.ndarray,
+              state: StreamState) -> tuple[PoseEstimate, StreamState]:
+        """``step`` before calibration and conversion: the model's world-frame estimate (N, 1, ...) of all K slots."""
         previous_actions = np.asarray(previous_actions)
         self._check(images, previous_actions, state.n_envs)
         try:
@@ -124,7 +120,18 @@ class LNetRunner:
         _, tracked, memory = self.model(
             inputs.images.to(device)[:, None], inputs.object_classes.to(device), inputs.held.to(device)[:, None],
             torch.as_tensor(previous_actions, dtype=torch.long, device=device)[:, None], state.memory)
-        return self.estimates(tracked, np.asarray(object_classes).shape[1]), StreamState(state.n_envs, memory)
+        return tracked, StreamState(state.n_envs, memory)
+
+    @torch.inference_mode()
+    def step(self, images: np.ndarray, object_classes: np.ndarray, held: np.ndarray, previous_actions: np.ndarray,
+             state: StreamState) -> tuple[Estimates, StreamState]:
+        """One frame of each of N environments -> (calibrated estimates, the next state); one forward pass.
+
+        images (N, H, W, 3) uint8; object_classes (N, n); held (N,) environment convention (n: none);
+        previous_actions (N,) the action taken before this frame, -1 at an episode's start.
+        """
+        tracked, state = self.track(images, object_classes, held, previous_actions, state)
+        return self.estimates(tracked, np.asarray(object_classes).shape[1]), state
 
     def estimates(self, tracked: PoseEstimate, n_objects: int) -> Estimates:
         """The last frame of the model's world-frame estimate (N, T, ...) for the first ``n_objects`` slots,

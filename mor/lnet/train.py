@@ -42,9 +42,9 @@ def run_model(model: LNet, batch: dict[str, torch.Tensor]) -> tuple:
 
 
 @torch.no_grad()
-def validation_loss(model: LNet, loader: DataLoader, device: torch.device) -> float:
+def validation_loss(model: LNet, loader: DataLoader, device: torch.device, beta: float = 0.0) -> float:
     model.eval()
-    losses = [float(lnet_loss(*run_model(model, batch)[:2], batch)[0])
+    losses = [float(lnet_loss(*run_model(model, batch)[:2], batch, beta)[0])
               for batch in (to_device(b, device) for b in loader)]
     model.train()
     return float(np.mean(losses))
@@ -68,13 +68,14 @@ def train(config: LNetConfig, params: TrainParams, train_root: Path, validation_
     # Model and optimizer, resumed from the last checkpoint when there is one.
     model = LNet(config).to(device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=params.learning_rate, weight_decay=params.weight_decay)
-    step, best, stale = 0, float("inf"), 0
+    step, best, stale, seconds_before = 0, float("inf"), 0, 0.0
     checkpoint_path = out_dir / CHECKPOINT
     if checkpoint_path.is_file():
         saved = load_checkpoint(checkpoint_path, expected, device)
         model.load_state_dict(saved["model"])
         optimizer.load_state_dict(saved["optimizer"])
         step, best, stale = saved["step"], saved["best"], saved["stale"]
+        seconds_before = saved.get("seconds", 0.0)
     elif (out_dir / LOG).exists():
         (out_dir / LOG).unlink()
 
@@ -88,7 +89,7 @@ def train(config: LNetConfig, params: TrainParams, train_root: Path, validation_
     log = csv.DictWriter(log_file, fieldnames=["step", "split", "loss", "seconds"], extrasaction="ignore")
     if log_file.tell() == 0:
         log.writeheader()
-    start = time.perf_counter()
+    start = time.perf_counter() - seconds_before  # wall time counts over resumed runs
     bar = tqdm(total=params.max_steps, initial=step, desc="train L-Net", unit="step", disable=not progress)
     model.train()
     stopped_early = False
@@ -98,7 +99,7 @@ def train(config: LNetConfig, params: TrainParams, train_root: Path, validation_
             if index < skip:
                 continue  # resuming mid-epoch: the same shuffled order, minus what was done
             batch = to_device(batch, device)
-            loss, _ = lnet_loss(*run_model(model, batch)[:2], batch)
+            loss, _ = lnet_loss(*run_model(model, batch)[:2], batch, params.beta_nll)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), params.grad_clip)
@@ -109,17 +110,18 @@ def train(config: LNetConfig, params: TrainParams, train_root: Path, validation_
             log.writerow({"step": step, "split": "train", "loss": loss.item(),
                           "seconds": time.perf_counter() - start})
             if step % params.eval_every == 0 or step == params.max_steps:
-                value = validation_loss(model, validation_loader, device)
+                value = validation_loss(model, validation_loader, device, params.beta_nll)
                 log.writerow({"step": step, "split": "validation", "loss": value,
                               "seconds": time.perf_counter() - start})
                 log_file.flush()
                 improved = value < best
                 best, stale = (value, 0) if improved else (best, stale + 1)
-                state = {**expected, "params": params.model_dump(), "step": step}
+                state = {**expected, "params": params.model_dump(), "step": step,
+                         "seconds": time.perf_counter() - start}
                 if improved:
                     save_checkpoint(out_dir / BEST, {**state, "model": model.state_dict(), "validation_loss": value})
-                save_checkpoint(checkpoint_path, {**state, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
-                                        "best": best, "stale": stale})
+                save_checkpoint(checkpoint_path, {**state, "model": model.state_dict(),
+                                                  "optimizer": optimizer.state_dict(), "best": best, "stale": stale})
                 stopped_early = stale >= params.patience
             if step >= params.max_steps or stopped_early:
                 break
@@ -127,6 +129,7 @@ def train(config: LNetConfig, params: TrainParams, train_root: Path, validation_
     log_file.close()
     summary = {"steps": step, "best_validation_loss": best, "stopped_early": stopped_early,
                "train_windows": len(train_set), "device": str(device), "dataset_version": dataset_version,
-               "image_size": train_set.image_size}
+               "image_size": train_set.image_size, "seconds": time.perf_counter() - start,
+               "torch_threads": torch.get_num_threads()}
     (out_dir / "train_summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary

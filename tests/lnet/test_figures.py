@@ -184,3 +184,13 @@ def test_an_ego_frame_estimate_is_refused(episode, square_arena) -> None:
 
     with pytest.raises(ValueError, match="world frame"):
         draw_estimate_panel(Figure().add_subplot(), square_arena, truth, EgoEstimate(), 0)
+
+
+def test_since_seen_figure_skips_empty_bins(tmp_path) -> None:
+    from mor.lnet.figures import write_since_seen  # noqa: PLC0415
+
+    curve = {"bin_start": [0, 1, 2], "median_m": [0.2, None, 0.5], "count": [3, 0, 2]}
+    path = write_since_seen(tmp_path / "s.png", {"lstm": curve, "filter": curve}, "t")
+    assert path.read_bytes()[:4] == b"\x89PNG"
+    with pytest.raises(ValueError, match="no curve"):
+        write_since_seen(tmp_path / "e.png", {}, "t")

@@ -40,17 +40,21 @@ def test_torch_frames_agree_with_the_simulator_geometry() -> None:
     np.testing.assert_allclose(back.numpy(), points, atol=1e-12)
 
 
+@pytest.mark.parametrize(("tracker", "visibility"), [("lstm", False), ("lstm", True), ("filter", True)])
 @pytest.mark.parametrize("object_head", ["global", "attention"])
 @pytest.mark.parametrize("encoder", ["compact", "resnet18"])
-def test_lnet_shapes(encoder: str, object_head: str) -> None:
-    model = LNet(SMALL.model_copy(update={"encoder": encoder, "object_head": object_head}))
+def test_lnet_shapes(encoder: str, object_head: str, tracker: str, visibility: bool) -> None:
+    model = LNet(SMALL.model_copy(update={"encoder": encoder, "object_head": object_head, "tracker": tracker,
+                                          "visibility": visibility}))
     batch = _batch()
     single, tracked, state = model(batch["images"], batch["object_classes"], batch["held"],
                                    previous_actions(batch["actions"]))
     assert single.frame == "ego" and tracked.frame == "world"
     assert tracked.agent_mean.shape == (2, 4, 2) and tracked.agent_tril.shape == (2, 4, 2, 2)
     assert tracked.object_mean.shape == (2, 4, 5, 2) and tracked.kappa.shape == (2, 4)
-    assert torch.all(tracked.kappa > 0) and state[0].shape == (1, 2, 32)
+    assert torch.all(tracked.kappa > 0) and torch.all(torch.diagonal(tracked.object_tril, dim1=-2, dim2=-1) > 0)
+    assert (single.visibility_logit is not None) == visibility
+    assert state[0].shape == ((1, 2, 32) if tracker == "lstm" else (2, 2))
 
 
 def test_attention_finds_each_object_in_its_own_cells() -> None:
@@ -78,6 +82,24 @@ def test_absent_objects_do_not_change_the_loss() -> None:
     assert loss.item() == pytest.approx(again.item())
 
 
+def test_with_visibility_the_posenet_object_terms_see_only_visible_frames_and_beta_reweights_them() -> None:
+    model = LNet(SMALL.model_copy(update={"visibility": True}))
+    batch = _batch()
+    batch["visible"] = torch.zeros(2, 4, 5, dtype=torch.bool)
+    batch["visible"][:, 1:3, 0] = True
+    out = model(batch["images"], batch["object_classes"], batch["held"], previous_actions(batch["actions"]))
+    _, parts = lnet_loss(*out[:2], batch)
+    assert parts["posenet_visibility"] > 0
+    moved = {**batch, "object_positions": batch["object_positions"].clone()}
+    moved["object_positions"][:, 0] += 5.0  # frame 0: object 0 is not visible there
+    _, again = lnet_loss(*out[:2], moved)
+    assert again["posenet_objects"] == pytest.approx(parts["posenet_objects"])
+    assert again["tracker_objects"] != pytest.approx(parts["tracker_objects"])  # the tracker answers for all
+    _, beta = lnet_loss(*out[:2], batch, beta=0.5)
+    assert beta["posenet_objects"] != pytest.approx(parts["posenet_objects"])
+    assert beta["tracker_objects"] == pytest.approx(parts["tracker_objects"])
+
+
 def _predictions(n: int, true_scale: float, stated_scale: float) -> Predictions:
     rng = np.random.default_rng(0)
     agent = rng.normal(size=(n, 3))
@@ -88,7 +110,8 @@ def _predictions(n: int, true_scale: float, stated_scale: float) -> Predictions:
         heading=agent[:, 2] + rng.vonmises(0.0, 100.0, size=n), kappa=np.full(n, 400.0),
         object_truth=objects, object_mean=objects + rng.normal(scale=true_scale, size=(n, 5, 2)),
         object_tril=np.broadcast_to(np.eye(2) * stated_scale, (n, 5, 2, 2)).copy(),
-        present=np.tile([True, True, True, False, False], (n, 1)), seen=np.ones((n, 5), bool),
+        present=np.tile([True, True, True, False, False], (n, 1)), visible=np.ones((n, 5), bool),
+        since_seen=np.zeros((n, 5), int),
         episode=np.zeros(n, int), frame=np.arange(n))
 
 

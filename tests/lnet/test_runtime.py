@@ -23,9 +23,12 @@ SMALL = LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)
 SIZE = 16
 
 
-def _runner(calibration: Calibration = Calibration()) -> LNetRunner:
+TRACKERS = [SMALL, SMALL.model_copy(update={"tracker": "filter", "visibility": True})]
+
+
+def _runner(calibration: Calibration = Calibration(), config: LNetConfig = SMALL) -> LNetRunner:
     torch.manual_seed(0)
-    return LNetRunner(LNet(SMALL), calibration, SIZE, "test")
+    return LNetRunner(LNet(config), calibration, SIZE, "test")
 
 
 def _rollouts(n_envs: int, steps: int) -> list[dict[str, np.ndarray]]:
@@ -49,9 +52,10 @@ def _previous(frames: list[dict[str, np.ndarray]], t: int) -> np.ndarray:
     return frames[t - 1]["actions"] if t > 0 else np.full(len(frames[0]["actions"]), -1)
 
 
-def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration() -> None:
+@pytest.mark.parametrize("config", TRACKERS, ids=["lstm", "filter"])
+def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration(config: LNetConfig) -> None:
     calibration = Calibration(agent_scale=2.0, object_scale=0.5, kappa_scale=3.0)
-    runner = _runner(calibration)
+    runner = _runner(calibration, config)
     frames = _rollouts(n_envs=3, steps=5)
     state = runner.initial_state(3)
     for t, frame in enumerate(frames):
@@ -77,8 +81,9 @@ def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration() ->
     np.testing.assert_allclose(estimates.heading_kappa, 3.0 * tracked.kappa[:, -1].numpy(), rtol=1e-5)
 
 
-def test_reset_restarts_only_the_environments_that_are_done() -> None:
-    runner = _runner()
+@pytest.mark.parametrize("config", TRACKERS, ids=["lstm", "filter"])
+def test_reset_restarts_only_the_environments_that_are_done(config: LNetConfig) -> None:
+    runner = _runner(config=config)
     frames = _rollouts(n_envs=2, steps=3)
     state = runner.initial_state(2)
     for t, frame in enumerate(frames[:2]):
@@ -139,3 +144,25 @@ def test_streaming_benchmark_times_the_environments_and_the_lnet_in_one_run() ->
     result = benchmark_streaming(SMALL, SimConfig(image_size=SIZE, n_objects=2), n_envs=2, steps=3, repeats=2)
     assert len(result["runs_env"]) == len(result["runs_lnet"]) == 2
     assert result["lnet_over_env"] == pytest.approx(result["lnet_frames_per_s"] / result["env_frames_per_s"])
+
+
+def test_live_oracle_episodes_are_scored_like_the_test_split() -> None:
+    from mor.lnet.evaluate import metrics, predict_live  # noqa: PLC0415
+    from mor.sim.config import SimConfig  # noqa: PLC0415
+
+    runner = _runner(config=TRACKERS[1])
+    predictions = predict_live(runner, SimConfig(image_size=SIZE), "oracle", episodes=3, seed=0, n_envs=2, horizon=6,
+                               progress=False)
+    assert sorted(set(predictions.episode.tolist())) == [0, 1, 2] and len(predictions.frame) == 3 * 7
+    assert predictions.present.sum(1).tolist() == [3] * 21 and predictions.object_truth.shape == (21, 5, 2)
+    assert predictions.frame[:7].tolist() == list(range(7))
+    result = metrics(predictions)
+    assert result["object_position_error_m"]["all"]["count"] == 63
+
+
+def test_steps_since_seen_counts_from_the_last_sighting_or_hold() -> None:
+    from mor.lnet.evaluate import steps_since_seen  # noqa: PLC0415
+
+    visible = np.array([[0, 0], [1, 0], [0, 0], [0, 0], [0, 0]], bool)
+    held = np.array([-1, -1, -1, 1, -1])
+    assert steps_since_seen(visible, held).tolist() == [[-1, -1], [0, -1], [1, -1], [2, 0], [3, 1]]

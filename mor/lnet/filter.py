@@ -1,0 +1,170 @@
+"""``tracker: filter``: a differentiable Gaussian belief over the world, updated frame by frame (our addition).
+
+The agent: a motion model learned from the previous action (per action, a forward distance and turn with learned
+noise, nothing taken from the simulator's noise), corrected by the PoseNet's global fix (a Kalman update).
+Each object: a Gaussian that starts at a learned prior over the arena, stays put on the floor, equals the agent's
+position while held (the held index is observed), lands ``rules.DROP_DISTANCE`` ahead of the agent when released
+(the agent's position and heading uncertainty carried into it), and is corrected by the PoseNet's ego measurement
+moved into the world frame with the estimated agent pose, weighted by the predicted visibility and a soft
+Mahalanobis gate. Everything is a torch expression, so the whole belief is trained with the NLL end to end
+(as backprop Kalman filters: Haarnoja et al. 2016; Kloss et al. 2021).
+
+Shapes: B episodes, K object slots. Positions in metres, headings in radians; the heading's belief is a Gaussian
+(mean, variance) on the circle, reported as a von Mises with kappa = 1 / variance.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import nn
+
+from mor.lnet.likelihoods import MIN_KAPPA
+from mor.sim.rules import DROP_DISTANCE, N_ACTIONS
+
+#: Mahalanobis^2 of an innovation beyond which a measurement is gated out (chi-square, 2 dof, 99%).
+GATE = 9.21
+_GATE_SHARPNESS = 2.0
+_EPS = 1e-6
+_LOG_PRIOR_STD = math.log(6.0 / math.sqrt(12.0))  # a uniform 6 m side: std 1.73 m (learned from there)
+
+#: The state: agent mean (B, 2), agent cov (B, 2, 2), heading (B,), heading variance (B,), object means (B, K, 2),
+#: object covs (B, K, 2, 2), the held index of the previous frame (B,) (-1 none).
+FilterState = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]
+
+
+def _eye(like: torch.Tensor) -> torch.Tensor:
+    return torch.eye(2, dtype=like.dtype, device=like.device)
+
+
+def _inverse(matrix: torch.Tensor) -> torch.Tensor:
+    """Inverse of symmetric positive 2x2 matrices (..., 2, 2), written out."""
+    a, b, c, d = matrix[..., 0, 0], matrix[..., 0, 1], matrix[..., 1, 0], matrix[..., 1, 1]
+    det = (a * d - b * c).clamp(min=_EPS * _EPS)
+    return torch.stack([torch.stack([d, -b], -1), torch.stack([-c, a], -1)], -2) / det[..., None, None]
+
+
+def cholesky_2x2(cov: torch.Tensor) -> torch.Tensor:
+    """Lower Cholesky factors of covariances (..., 2, 2), written out (batched LAPACK on 2x2 is slow on CPU)."""
+    a = torch.sqrt(cov[..., 0, 0].clamp(min=_EPS))
+    c = cov[..., 1, 0] / a
+    b = torch.sqrt((cov[..., 1, 1] - c * c).clamp(min=_EPS))
+    zero = torch.zeros_like(a)
+    return torch.stack([torch.stack([a, zero], -1), torch.stack([c, b], -1)], -2)
+
+
+def _outer(v: torch.Tensor) -> torch.Tensor:
+    return v.unsqueeze(-1) * v.unsqueeze(-2)
+
+
+def _symmetric(cov: torch.Tensor) -> torch.Tensor:
+    return 0.5 * (cov + cov.transpose(-1, -2)) + _EPS * _eye(cov)
+
+
+def _wrap(angle: torch.Tensor) -> torch.Tensor:
+    return torch.atan2(torch.sin(angle), torch.cos(angle))
+
+
+def _kalman(mean: torch.Tensor, cov: torch.Tensor, z: torch.Tensor, noise: torch.Tensor,
+            weight: torch.Tensor | None = None, gated: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+    """A Kalman update of N(mean, cov) by a direct measurement z ~ N(x, noise). The gain is scaled by ``weight``
+    (in [0, 1]; None: 1) and, when ``gated``, by a soft gate that drops innovations beyond ``GATE`` (Mahalanobis^2
+    under cov + noise). Returns (mean, cov); (1 - w K) cov stays positive semi-definite for w in [0, 1]."""
+    innovation = z - mean
+    s_inv = _inverse(cov + noise)
+    gain = cov @ s_inv
+    if gated:
+        d2 = (innovation.unsqueeze(-2) @ s_inv @ innovation.unsqueeze(-1))[..., 0, 0]
+        gate = torch.sigmoid(_GATE_SHARPNESS * (GATE - d2))
+        weight = gate if weight is None else gate * weight
+    if weight is not None:
+        gain = gain * weight[..., None, None]
+    mean = mean + (gain @ innovation.unsqueeze(-1))[..., 0]
+    return mean, _symmetric(cov - gain @ cov)
+
+
+class BeliefFilter(nn.Module):
+    """The learned parameters of the filter and one step of it (see the module docstring)."""
+
+    def __init__(self, n_slots: int) -> None:
+        super().__init__()
+        self.n_slots = n_slots
+        actions = N_ACTIONS + 1  # the last row: no previous action (an episode's first frame)
+        self.forward_distance = nn.Parameter(torch.zeros(actions))
+        self.turn = nn.Parameter(torch.zeros(actions))
+        self.log_forward_std = nn.Parameter(torch.full((actions,), math.log(0.05)))
+        self.log_turn_std = nn.Parameter(torch.full((actions,), math.log(0.05)))
+        self.agent_prior_mean = nn.Parameter(torch.zeros(2))
+        self.log_agent_prior_std = nn.Parameter(torch.tensor(_LOG_PRIOR_STD))
+        self.object_prior_mean = nn.Parameter(torch.zeros(2))
+        self.log_object_prior_std = nn.Parameter(torch.tensor(_LOG_PRIOR_STD))
+        self.log_agent_std = nn.Parameter(torch.tensor(math.log(0.01)))   # the agent, any direction, per step
+        self.log_floor_std = nn.Parameter(torch.tensor(math.log(0.01)))   # objects on the floor, per step
+        self.log_drop_std = nn.Parameter(torch.tensor(math.log(0.05)))    # where a dropped object lands
+        self.log_fix_scale = nn.Parameter(torch.zeros(3))                 # PoseNet agent, heading, objects
+
+    def initial_state(self, n: int, device: torch.device | str = "cpu") -> FilterState:
+        """The prior belief of ``n`` episodes (agent and objects anywhere in the arena, heading unknown)."""
+        eye = torch.eye(2, device=device)
+        agent_var = torch.exp(2 * self.log_agent_prior_std)
+        object_var = torch.exp(2 * self.log_object_prior_std)
+        return (self.agent_prior_mean.expand(n, 2), (agent_var * eye).expand(n, 2, 2),
+                torch.zeros(n, device=device), torch.full((n,), math.pi ** 2 / 3.0, device=device),
+                self.object_prior_mean.expand(n, self.n_slots, 2),
+                (object_var * eye).expand(n, self.n_slots, 2, 2), torch.full((n,), -1, dtype=torch.long, device=device))
+
+    def step(self, state: FilterState, agent_fix: tuple[torch.Tensor, ...], ego_objects: tuple[torch.Tensor, ...],
+             visibility: torch.Tensor | None, held: torch.Tensor, previous_action: torch.Tensor) -> FilterState:
+        """One frame. agent_fix: the PoseNet's (mean (B, 2), tril (B, 2, 2), heading (B,), kappa (B,));
+        ego_objects: (mean (B, K, 2), tril (B, K, 2, 2)) in the ego frame; visibility (B, K) probabilities or
+        None (then every measurement is weighted by the gate alone); held (B,) index or -1; previous_action (B,)
+        the action before this frame, -1 none."""
+        agent, agent_cov, heading, heading_var, objects, object_cov, previous_held = state
+        eye = _eye(agent)
+        # 1. Motion: the previous action's learned displacement and turn, and their learned noise.
+        action = torch.where(previous_action >= 0, previous_action, torch.full_like(previous_action, N_ACTIONS))
+        distance, turn = self.forward_distance[action], self.turn[action]
+        direction = torch.stack([torch.cos(heading), torch.sin(heading)], -1)
+        normal = torch.stack([-torch.sin(heading), torch.cos(heading)], -1)
+        agent = agent + distance[:, None] * direction
+        agent_cov = (agent_cov + (distance ** 2 * heading_var)[:, None, None] * _outer(normal)
+                     + torch.exp(2 * self.log_forward_std[action])[:, None, None] * _outer(direction)
+                     + torch.exp(2 * self.log_agent_std) * eye)
+        heading = _wrap(heading + turn)
+        heading_var = heading_var + torch.exp(2 * self.log_turn_std[action])
+        # 2. The PoseNet's global fix.
+        fix_mean, fix_tril, fix_heading, fix_kappa = agent_fix
+        scale = torch.exp(2 * self.log_fix_scale)
+        agent, agent_cov = _kalman(agent, agent_cov, fix_mean, scale[0] * fix_tril @ fix_tril.transpose(-1, -2))
+        fix_var = scale[1] / fix_kappa.clamp(min=MIN_KAPPA)
+        gain = heading_var / (heading_var + fix_var)
+        heading = _wrap(heading + gain * _wrap(fix_heading - heading))
+        heading_var = (1.0 - gain) * heading_var
+        # 3. Objects on the floor drift a little; the held one is where the agent is; a released one lands ahead.
+        slots = torch.arange(self.n_slots, device=held.device)
+        is_held = held[:, None] == slots
+        dropped = (previous_held[:, None] == slots) & ~is_held
+        object_cov = object_cov + torch.exp(2 * self.log_floor_std) * eye
+        direction = torch.stack([torch.cos(heading), torch.sin(heading)], -1)
+        normal = torch.stack([-torch.sin(heading), torch.cos(heading)], -1)
+        landing = agent + DROP_DISTANCE * direction
+        landing_cov = (agent_cov + (DROP_DISTANCE ** 2 * heading_var)[:, None, None] * _outer(normal)
+                       + torch.exp(2 * self.log_drop_std) * eye)
+        objects = torch.where(is_held[..., None], agent[:, None], torch.where(dropped[..., None], landing[:, None],
+                                                                               objects))
+        object_cov = torch.where(is_held[..., None, None], agent_cov[:, None],
+                                 torch.where(dropped[..., None, None], landing_cov[:, None], object_cov))
+        # 4. The PoseNet's ego measurements, moved into the world frame with the estimated agent pose.
+        ego_mean, ego_tril = ego_objects
+        c, s = torch.cos(heading)[:, None, None], torch.sin(heading)[:, None, None]
+        rotation = torch.cat([torch.cat([c, -s], -1), torch.cat([s, c], -1)], -2).unsqueeze(1)  # (B, 1, 2, 2)
+        measured = agent[:, None] + (rotation @ ego_mean.unsqueeze(-1))[..., 0]
+        jacobian = torch.stack([-s[..., 0] * ego_mean[..., 0] - c[..., 0] * ego_mean[..., 1],
+                                c[..., 0] * ego_mean[..., 0] - s[..., 0] * ego_mean[..., 1]], -1)  # d measured / d heading
+        ego_cov = ego_tril @ ego_tril.transpose(-1, -2)
+        noise = (scale[2] * rotation @ ego_cov @ rotation.transpose(-1, -2) + agent_cov[:, None]
+                 + heading_var[:, None, None, None] * _outer(jacobian))
+        weight = (~is_held).to(objects.dtype) if visibility is None else visibility * ~is_held
+        objects, object_cov = _kalman(objects, object_cov, measured, noise, weight, gated=True)
+        return agent, agent_cov, heading, heading_var, objects, object_cov, held

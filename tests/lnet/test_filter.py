@@ -1,0 +1,73 @@
+"""The belief filter's rules on hand-made measurements: fix, held, drop, unseen, visibility weight, gate."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from mor.lnet.filter import BeliefFilter, cholesky_2x2
+from mor.sim.rules import DROP_DISTANCE
+
+TIGHT = 1e-3  # metres: a near-exact measurement
+
+
+def _fix(x: float, y: float, theta: float) -> tuple[torch.Tensor, ...]:
+    return (torch.tensor([[x, y]]), TIGHT * torch.eye(2)[None], torch.tensor([theta]), torch.tensor([1e6]))
+
+
+def _ego(points: list[tuple[float, float]]) -> tuple[torch.Tensor, torch.Tensor]:
+    return torch.tensor([points]), (TIGHT * torch.eye(2)).expand(1, len(points), 2, 2)
+
+
+@torch.no_grad()
+def _run(steps: list[dict]) -> list[tuple[torch.Tensor, ...]]:
+    belief = BeliefFilter(n_slots=2)
+    state = belief.initial_state(1)
+    states = []
+    for step in steps:
+        state = belief.step(state, _fix(*step["agent"]), _ego(step["ego"]), torch.tensor([step["visible"]]),
+                            torch.tensor([step["held"]]), torch.tensor([step.get("action", -1)]))
+        states.append(state)
+    return states
+
+
+def test_a_seen_object_moves_to_its_measurement_and_an_unseen_one_keeps_the_prior() -> None:
+    (state,) = _run([{"agent": (1.0, -1.0, math.pi / 2), "ego": [(2.0, 0.0), (0.5, 0.5)], "visible": [1.0, 0.0],
+                      "held": -1}])
+    agent, _, heading, _, objects, object_cov, _ = state
+    torch.testing.assert_close(agent[0], torch.tensor([1.0, -1.0]), atol=1e-3, rtol=0)
+    assert heading.item() == pytest.approx(math.pi / 2, abs=1e-3)
+    torch.testing.assert_close(objects[0, 0], torch.tensor([1.0, 1.0]), atol=1e-2, rtol=0)  # 2 m ahead, facing +y
+    prior = BeliefFilter(n_slots=2).initial_state(1)
+    torch.testing.assert_close(objects[0, 1], prior[4][0, 1], atol=1e-6, rtol=0)
+    assert object_cov[0, 1, 0, 0] > 1.0 > 100 * object_cov[0, 0, 0, 0]
+
+
+def test_a_held_object_follows_the_agent_and_lands_ahead_when_dropped() -> None:
+    steps = [{"agent": (0.0, 0.0, 0.0), "ego": [(3.0, 0.0), (0.0, 0.0)], "visible": [0.0, 0.0], "held": 1},
+             {"agent": (1.0, 0.5, 0.0), "ego": [(3.0, 0.0), (0.0, 0.0)], "visible": [0.0, 0.0], "held": 1},
+             {"agent": (1.0, 0.5, math.pi), "ego": [(3.0, 0.0), (0.0, 0.0)], "visible": [0.0, 0.0], "held": -1,
+              "action": 4}]
+    held, carried, dropped = _run(steps)
+    for state in (held, carried):
+        torch.testing.assert_close(state[4][0, 1], state[0][0])  # exactly the agent's belief
+        torch.testing.assert_close(state[5][0, 1], state[1][0])
+    torch.testing.assert_close(carried[0][0], torch.tensor([1.0, 0.5]), atol=1e-2, rtol=0)
+    torch.testing.assert_close(dropped[4][0, 1], torch.tensor([1.0 - DROP_DISTANCE, 0.5]), atol=2e-2, rtol=0)
+    assert dropped[5][0, 1, 0, 0] < 0.1  # the agent's (small) uncertainty carried, not the prior's
+
+
+def test_an_outlier_far_outside_a_confident_belief_is_gated_out() -> None:
+    seen = {"agent": (0.0, 0.0, 0.0), "ego": [(2.0, 0.0), (0.0, 0.0)], "visible": [1.0, 0.0], "held": -1}
+    outlier = {**seen, "ego": [(2.0, 2.5), (0.0, 0.0)]}
+    _, after = _run([seen, outlier])
+    torch.testing.assert_close(after[4][0, 0], torch.tensor([2.0, 0.0]), atol=2e-2, rtol=0)
+
+
+def test_cholesky_2x2_reproduces_the_covariance() -> None:
+    cov = torch.tensor([[2.0, 0.3], [0.3, 0.5]])
+    tril = cholesky_2x2(cov)
+    torch.testing.assert_close(tril @ tril.T, cov)
+    torch.testing.assert_close(tril, torch.linalg.cholesky(cov))
