@@ -4,8 +4,9 @@ One process plays a random-policy episode stream once to record states and actio
 steps: the step without rendering (rules, rewards, ``info``: ``render_frames=False``), the scene update
 (``Scene.set_state``: mocap poses, ``mj_kinematics``, ``mj_camlight``), the draw call (``Scene.draw``: MuJoCo
 builds its scene and issues the OpenGL commands), rasterization (``glFinish``: with llvmpipe, the CPU draws the
-pixels here) and the read-back with its copy (``Scene.read_pixels``); and the whole rendered step. The remainder
-of the whole step over the parts is the Python around them (the Gymnasium wrappers, the observation dict).
+pixels here) and the read-back with its copy (``Scene.read_pixels``); and the whole rendered step. "other" is
+what the parts, each timed in its own loop, do not add up to in whole steps: mostly the cache cost of alternating
+Python with rendering (the wrappers and the observation dict are already in the step without rendering).
 Times are microseconds per step: CPU (``time.process_time``, every thread of the process) and wall clock.
 """
 
