@@ -233,6 +233,16 @@ def render_card(stats: CardStats, params: dict[str, Any], datasets_root_rel: str
     ]
     if figures.get("coverage"):
         lines += [f"![Coverage map: frames per {coverage.cell_size:g} m cell, log scale]({figures['coverage']})", ""]
+    if stats.visibility is not None:
+        v = stats.visibility
+        lines += ["## Visibility", "",
+                  "Per frame, which objects the camera sees by the simulator's rule (`mor.sim.rules.visible`: in the "
+                  "60° field of view and not occluded; a held object is not in view), stored as "
+                  "`state.object_visible`.", "",
+                  f"- An object is in view on {100 * v.object_frame_share:.1f}% of its frames; some object is in view "
+                  f"on {100 * v.any_frame_share:.1f}% of all frames.",
+                  f"- {100 * v.never_seen_share:.1f}% of the objects are never in view during their episode.",
+                  f"- Median agent-object distance when in view: {v.median_distance:.2f} m.", ""]
     lines += ["## Object classes and wall textures", ""]
     if figures.get("classes"):
         present = int(np.count_nonzero(stats.classes))

@@ -27,6 +27,7 @@ import pyarrow.parquet as pq
 from mor.data.episode_io import EpisodeData, read_episode
 from mor.data.manifest import SPLITS, manifest_version
 from mor.data.parallel import ordered_map
+from mor.data.visibility import visible_per_frame
 from mor.errors import MorError
 from mor.sim.arena import Arena
 from mor.sim.catalog import N_CLASSES
@@ -179,12 +180,17 @@ class EpisodeSummary:
     wall_textures: tuple[int, ...]
     episode_steps: int | None  # the collection's horizon, when the episode's params record it
     params_json: str  # the parameters recorded in the episode's metadata, as sorted JSON
+    visible_frames: tuple[int, ...] = ()  # per object: frames it is in view (``mor.data.visibility``)
+    any_visible_frames: int = 0  # frames with at least one object in view
+    visible_distances: tuple[float, ...] = ()  # agent-object distance (m) on every (frame, object) in view
 
 
 def summarize_episode(episode: EpisodeData) -> EpisodeSummary:
     """What the card needs from ``episode`` (its images are not used)."""
     distances = displacement_from_start(episode.agent_poses)
     actions = np.asarray(episode.actions)
+    visible = visible_per_frame(episode.agent_poses, episode.object_positions, episode.held)
+    ranges = np.linalg.norm(episode.object_positions - episode.agent_poses[:, None, :2], axis=-1)
     steps = episode.header.params.get("episode_steps") if isinstance(episode.header.params, dict) else None
     return EpisodeSummary(
         episode_id=episode.header.episode_id, source=episode.header.source, n_frames=episode.n_frames,
@@ -197,6 +203,8 @@ def summarize_episode(episode: EpisodeData) -> EpisodeSummary:
         wall_textures=tuple(int(t) for t in episode.header.wall_textures),
         episode_steps=int(steps) if isinstance(steps, int | float) else None,
         params_json=json.dumps(plain(episode.header.params), sort_keys=True),
+        visible_frames=tuple(int(v) for v in visible.sum(0)), any_visible_frames=int(visible.any(1).sum()),
+        visible_distances=tuple(float(d) for d in ranges[visible]),
     )
 
 
@@ -295,6 +303,29 @@ def coverage_stats(summaries: Sequence[EpisodeSummary], arena: Arena, cell_size:
     )
 
 
+@dataclass(frozen=True)
+class VisibilityStats:
+    """How often the objects are in view (``mor.sim.rules.visible``, the dataset's ``state.object_visible``)."""
+
+    object_frame_share: float  # share of (frame, object) pairs with the object in view
+    any_frame_share: float  # share of frames with at least one object in view
+    never_seen_share: float  # share of (episode, object) pairs never in view in the episode
+    median_distance: float  # median agent-object distance (m) when in view
+    episodes: int
+
+
+def visibility_stats(summaries: Sequence[EpisodeSummary]) -> VisibilityStats:
+    """Visibility over all ``summaries`` (episodes without visibility records count as none in view)."""
+    pairs = sum(s.n_frames * len(s.object_classes) for s in summaries)
+    per_object = [v for s in summaries for v in s.visible_frames]
+    distances = [d for s in summaries for d in s.visible_distances]
+    return VisibilityStats(
+        object_frame_share=sum(per_object) / max(1, pairs),
+        any_frame_share=sum(s.any_visible_frames for s in summaries) / max(1, sum(s.n_frames for s in summaries)),
+        never_seen_share=sum(v == 0 for v in per_object) / max(1, len(per_object)),
+        median_distance=float(np.median(distances)) if distances else float("nan"), episodes=len(summaries))
+
+
 @dataclass
 class CardStats:
     """Everything the card reports, computed from the manifest and the episodes."""
@@ -305,6 +336,7 @@ class CardStats:
     coverage: CoverageStats
     classes: np.ndarray  # (N_CLASSES,) objects per class
     textures: list[Counter[int]]  # per wall side, texture index -> draws
+    visibility: VisibilityStats | None = None
     recorded_params: list[tuple[str, int]] = field(default_factory=list)  # (params JSON, episodes), most first
     image_size: int | None = None  # read from the example frames
     frame_captions: list[tuple[str, list[int]]] = field(default_factory=list)  # (episode id, frame indices)
@@ -345,6 +377,7 @@ def compute_stats(manifest_path: Path, episodes_root: Path, arena: Arena, cell_s
     return CardStats(
         version=version, rows=rows, summaries=summaries, coverage=coverage_stats(summaries, arena, cell_size),
         classes=class_histogram(summaries), textures=texture_histograms(summaries),
+        visibility=visibility_stats(summaries),
         recorded_params=sorted(Counter(s.params_json for s in summaries).items(), key=lambda kv: -kv[1]),
     )
 

@@ -123,6 +123,8 @@ def test_dataset_card_from_a_tiny_collection(tiny_collection: Path, tiny_spec: C
     size = tiny_spec.sim.image_size
     assert f"| `observation.image` | image | ({size}, {size}, 3) |" in card  # the shape, read from the frames
     assert f"episode_steps: {tiny_spec.episode_steps}" in card  # the params block
+    share = float(re.search(r"An object is in view on ([0-9.]+)% of its frames", card).group(1))
+    assert 0.0 < share < 100.0
 
 
 def test_card_configs_point_at_the_split_datasets(tiny_dataset: tuple[Path, Path, list[dict]],
