@@ -12,7 +12,7 @@ from mor.config import Profile
 from mor.data.manifest import manifest_version, read_manifest
 from mor.data.sequences import SequenceWindows
 from mor.lnet.card import read_json, render_model_card, write_model_card
-from mor.lnet.evaluate import Predictions, metrics, predict, predict_live
+from mor.lnet.evaluate import Predictions, metrics, predict, predict_live, story
 from mor.lnet.figures import (
     write_estimate_gif,
     write_estimate_strip,
@@ -24,7 +24,6 @@ from pipelines import paths
 from pipelines.io import write_json
 from pipelines.lnet_io import load_trained
 
-FIGURE_EPISODE = 0
 ORACLE_SEED = 1000  # episode seeds 1e9 + i: disjoint from the collection's (seed 0: 0 .. 1e6 - 1)
 
 
@@ -55,8 +54,9 @@ def run(profile: Profile) -> dict[str, Any]:
     write_reliability_diagram(card / "reliability.png", np.asarray(result["before_calibration"]["reliability"]
                               ["nominal"]), {k: np.asarray(v) for k, v in reliability.items()},
                               "L-Net reliability on the test split")
-    episode = SequenceWindows(paths.LEROBOT / "test", window=None)[FIGURE_EPISODE]
-    rows = predictions.episode == FIGURE_EPISODE
+    shown_episode, frames = story(predictions)
+    episode = SequenceWindows(paths.LEROBOT / "test", window=None)[shown_episode]
+    rows = predictions.episode == shown_episode
     shown = calibration.apply(predictions).select(rows)
     truth = {"agent_poses": episode["agent_pose"].numpy(), "object_positions": episode["object_positions"].numpy(),
              "object_classes": episode["object_classes"].numpy()}
@@ -64,7 +64,6 @@ def run(profile: Profile) -> dict[str, Any]:
                                                         "object_mean", "object_tril")}
     images = episode["images"].numpy()
     arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
-    frames = np.linspace(0, len(images) - 1, 6).round().astype(int).tolist()
     write_estimate_strip(card / "estimates_strip.png", arena, truth, estimate, frames, images)
     write_estimate_gif(card / "estimates.gif", arena, truth, estimate, images, fps=5, every=2)
     curves = {"test": result["after_calibration"]["object_error_by_steps_since_seen"]}

@@ -46,7 +46,7 @@ class Predictions:
     agent_pose (N, 3) truth; agent_mean (N, 2); agent_tril (N, 2, 2); heading (N,); kappa (N,);
     object_truth (N, K, 2); object_mean (N, K, 2); object_tril (N, K, 2, 2); present (N, K) slot in use;
     visible (N, K) in view now (``rules.visible``); since_seen (N, K) frames since the object was last visible or
-    held (0: now; -1: not yet in this episode); episode (N,); frame (N,).
+    held (0: now; -1: not yet in this episode); held (N,) index or -1; episode (N,); frame (N,).
     """
 
     agent_pose: np.ndarray
@@ -60,6 +60,7 @@ class Predictions:
     present: np.ndarray
     visible: np.ndarray
     since_seen: np.ndarray
+    held: np.ndarray
     episode: np.ndarray
     frame: np.ndarray
 
@@ -92,7 +93,28 @@ def episode_predictions(estimate: dict[str, np.ndarray], agent_pose: np.ndarray,
         heading=estimate["heading"], kappa=estimate["kappa"], object_truth=object_positions,
         object_mean=estimate["object_mean"], object_tril=estimate["object_tril"],
         present=np.broadcast_to(present, (length, len(present))), visible=visible,
-        since_seen=steps_since_seen(visible, held), episode=np.full(length, episode), frame=np.arange(length))
+        since_seen=steps_since_seen(visible, held), held=held, episode=np.full(length, episode),
+        frame=np.arange(length))
+
+
+def story(predictions: Predictions, n_frames: int = 6) -> tuple[int, list[int]]:
+    """An episode and ``n_frames`` frames of it that show the tracker at work: the first episode with a pick
+    followed by a drop, at the start, when the carried object first comes into view, when it is picked, while it
+    is carried, when it is dropped, and at the end. Without such an episode: the first one, evenly spaced."""
+    p = predictions
+    for episode in np.unique(p.episode):
+        rows = np.flatnonzero(p.episode == episode)
+        held, visible = p.held[rows], p.visible[rows]
+        picks = np.flatnonzero((held[1:] >= 0) & (held[:-1] < 0)) + 1
+        for pick in picks:
+            drops = np.flatnonzero((held[pick + 1:] < 0)) + pick + 1
+            if len(drops):
+                slot, drop = int(held[pick]), int(drops[0])
+                first_seen = int(np.argmax(visible[:, slot])) if visible[:, slot].any() else 0
+                chosen = [0, min(first_seen, pick), pick, (pick + drop) // 2, drop, len(rows) - 1]
+                return int(episode), sorted(set(chosen))
+    first = np.flatnonzero(p.episode == p.episode[0])
+    return int(p.episode[0]), np.linspace(0, len(first) - 1, n_frames).round().astype(int).tolist()
 
 
 def concatenate(parts: list[Predictions]) -> Predictions:

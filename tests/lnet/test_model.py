@@ -111,7 +111,7 @@ def _predictions(n: int, true_scale: float, stated_scale: float) -> Predictions:
         object_truth=objects, object_mean=objects + rng.normal(scale=true_scale, size=(n, 5, 2)),
         object_tril=np.broadcast_to(np.eye(2) * stated_scale, (n, 5, 2, 2)).copy(),
         present=np.tile([True, True, True, False, False], (n, 1)), visible=np.ones((n, 5), bool),
-        since_seen=np.zeros((n, 5), int),
+        since_seen=np.zeros((n, 5), int), held=np.full(n, -1),
         episode=np.zeros(n, int), frame=np.arange(n))
 
 

@@ -166,3 +166,14 @@ def test_steps_since_seen_counts_from_the_last_sighting_or_hold() -> None:
     visible = np.array([[0, 0], [1, 0], [0, 0], [0, 0], [0, 0]], bool)
     held = np.array([-1, -1, -1, 1, -1])
     assert steps_since_seen(visible, held).tolist() == [[-1, -1], [0, -1], [1, -1], [2, 0], [3, 1]]
+
+
+def test_story_picks_an_episode_with_a_pick_then_a_drop() -> None:
+    from mor.lnet.evaluate import story  # noqa: PLC0415
+
+    held = np.array([-1] * 6 + [-1, -1, 1, 1, 1, -1, -1])  # episode 1 picks object 1 at frame 2, drops at 5
+    visible = np.zeros((13, 5), bool)
+    visible[7, 1] = True
+    episode = np.array([0] * 6 + [1] * 7)
+    predictions = type("P", (), {"episode": episode, "held": held, "visible": visible})()
+    assert story(predictions) == (1, [0, 1, 2, 3, 5, 6])
