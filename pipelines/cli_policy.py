@@ -103,3 +103,13 @@ def eval_tables(
             raise ConfigError(f"--table: Table {number} is not built yet; available: {', '.join(map(str, TABLES))}")
         require_complete(TABLES[number], rows)
         typer.echo(f"Table {number}: {TABLES[number].title}\n{table_markdown(TABLES[number], rows)}\n")
+
+
+@eval_app.command("cards")
+def eval_cards(profile: ProfileOption = None, params: ParamsOption = DEFAULT_PARAMS) -> None:
+    """Write a policy card and an episode video for every trained variant (cards/policy/<variant>/)."""
+    from pipelines import evaluate  # noqa: PLC0415
+
+    name = active_profile(profile, params)
+    for path in evaluate.write_policy_cards(load_profile(name, params), name):
+        typer.echo(f"wrote {path}")

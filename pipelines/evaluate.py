@@ -11,11 +11,12 @@ from typing import Any
 from mor.atomic import atomic_output
 from mor.config import Profile
 from mor.eval.card import write_results_card
-from mor.eval.methods import MethodSpec, TrainedPolicies, method_spec
+from mor.eval.methods import METHODS, MethodSpec, TrainedPolicies, method_spec
+from mor.eval.policy_card import write_policy_card
 from mor.eval.protocol import decider, metric_summaries, run_protocol
 from mor.eval.video import write_policy_video
 from mor.eval.results import ROW_KEYS, arena_label, merge_rows
-from mor.policy.names import TASKS
+from mor.policy.names import TASKS, VARIANTS
 from mor.errors import ConfigError
 from mor.policy.observations import BatchTracker, GroundTruthBatchTracker, SingleTracker, has_uncertainty
 from mor.sim.arena import Arena
@@ -53,7 +54,7 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
         train_steps = {task: json.loads((paths.POLICY_CARD / method.variant / task / "summary.json").read_text())
                        ["steps"] for task in TASKS if task != "decision" or method.decision == "learned"}
     records = run_protocol(method, sim, protocol.seeds, protocol.episodes, paths.EVAL / f"{method.name}.jsonl",
-                           policies, tracker_factory, protocol.n_envs, progress)
+                           policies, tracker_factory, protocol.n_envs, progress, protocol.horizon)
     row = {"method": method.name, "encoder": None, "arena": arena_label(sim.arena),
            "policy_arena": arena_label(sim.arena), "n_objects": sim.n_objects, "seeds": protocol.seeds,
            "episodes_per_seed": protocol.episodes, "train_steps": train_steps,
@@ -70,7 +71,8 @@ def policy_video(profile: Profile, method_name: str, seed: int, out: Path) -> di
     policies, tracker_factory = load_method(profile, method)
     arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
     return write_policy_video(out, profile.sim, SingleTracker(tracker_factory(1)), policies.pick, policies.drop,
-                              decider(method, policies, arena), has_uncertainty(method.variant), seed)
+                              decider(method, policies, arena), has_uncertainty(method.variant), seed,
+                              horizon=profile.evaluate.horizon)
 
 
 def collect_results(profile_name: str) -> Path:
@@ -86,3 +88,20 @@ def collect_results(profile_name: str) -> Path:
     _write_json(path, results)
     write_results_card(results, paths.RESULTS_CARD)
     return path
+
+
+def write_policy_cards(profile: Profile, profile_name: str, video_seed: int = 0) -> list[Path]:
+    """``cards/policy/<variant>/README.md`` and ``episode.mp4`` for every variant with trained policies."""
+    results_path = paths.RESULTS_CARD / "results.json"
+    rows = json.loads(results_path.read_text())["rows"] if results_path.is_file() else []
+    written = []
+    for variant in VARIANTS:
+        folder = paths.POLICY_CARD / variant
+        summaries = {task: json.loads((folder / task / "summary.json").read_text()) for task in TASKS
+                     if (folder / task / "summary.json").is_file()}
+        if len(summaries) < len(TASKS):
+            continue
+        mine = [r for r in rows if r["method"] in METHODS and METHODS[r["method"]].variant == variant]
+        policy_video(profile, variant, video_seed, folder / "episode.mp4")
+        written.append(write_policy_card(folder, variant, summaries, mine, "episode.mp4", profile_name))
+    return written

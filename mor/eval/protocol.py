@@ -48,8 +48,9 @@ def decider(method: MethodSpec, policies: TrainedPolicies, arena: Arena) -> Deci
     return learned
 
 
-def _play_scripted(method: MethodSpec, task: str, sim: SimConfig, seed: int) -> dict[str, Any]:
-    env = make_task_env("decision" if task == "rearrange" else task, sim, render_frames=False)
+def _play_scripted(method: MethodSpec, task: str, sim: SimConfig, seed: int, env_kwargs: dict[str, Any]
+                   ) -> dict[str, Any]:
+    env = make_task_env("decision" if task == "rearrange" else task, sim, render_frames=False, **env_kwargs)
     try:
         record = run_episode(env, make_policy(method.name, env, seed=seed), seed)
     finally:
@@ -67,12 +68,12 @@ def episode_keys(seeds: list[int], episodes: int) -> Iterator[tuple[str, int, in
 def run_protocol(
     method: MethodSpec, sim: SimConfig, seeds: list[int], episodes: int, records_path: Path,
     policies: TrainedPolicies | None = None, tracker_factory: Callable[[int], BatchTracker] | None = None,
-    n_envs: int = 8, progress: bool = True,
+    n_envs: int = 8, progress: bool = True, horizon: int | None = None,
 ) -> list[dict[str, Any]]:
     """Play every (task, seed, episode) not yet in ``records_path`` (JSON Lines, appended: resumable).
 
     Learned methods play ``n_envs`` episodes in lockstep (``mor.eval.lockstep``) with a tracker from
-    ``tracker_factory(n)``; the scripted ones play one at a time.
+    ``tracker_factory(n)``; the scripted ones play one at a time. ``horizon``: a cap on every episode's steps.
     """
     done = {(r["task"], r["seed"], r["episode"]): r for r in read_records(records_path)}
     todo = [key for key in episode_keys(seeds, episodes) if key not in done]
@@ -80,7 +81,8 @@ def run_protocol(
         partial.write_text("".join(json.dumps(r) + "\n" for r in done.values()))
     with records_path.open("a") as handle, tqdm(total=len(todo), desc=f"eval {method.name}", unit="ep",
                                                 disable=not progress, dynamic_ncols=True) as bar:
-        for key, outcome in _play(method, sim, todo, policies, tracker_factory, n_envs):
+        env_kwargs = {} if horizon is None else {"horizon": horizon}
+        for key, outcome in _play(method, sim, todo, policies, tracker_factory, n_envs, env_kwargs):
             task, seed, episode = key
             record = {"method": method.name, "task": task, "seed": seed, "episode": episode,
                       "reset_seed": episode_seed(seed, episode), **outcome}
@@ -92,7 +94,7 @@ def run_protocol(
 
 
 def _play(method: MethodSpec, sim: SimConfig, todo: list[tuple[str, int, int]], policies: TrainedPolicies | None,
-          tracker_factory: Callable[[int], BatchTracker] | None, n_envs: int
+          tracker_factory: Callable[[int], BatchTracker] | None, n_envs: int, env_kwargs: dict[str, Any]
           ) -> Iterator[tuple[tuple[str, int, int], dict[str, Any]]]:
     for task in EVAL_TASKS:
         keys = [(key, episode_seed(key[1], key[2])) for key in todo if key[0] == task]
@@ -100,13 +102,13 @@ def _play(method: MethodSpec, sim: SimConfig, todo: list[tuple[str, int, int]], 
             continue
         if method.decision == "scripted":
             for key, seed in keys:
-                yield key, _play_scripted(method, task, sim, seed)
+                yield key, _play_scripted(method, task, sim, seed, env_kwargs)
             continue
         n = min(n_envs, len(keys))
         skills = {"pick": policies.pick, "drop": policies.drop}
         decide = decider(method, policies, Arena.build(sim.arena, sim.arena_size))
         yield from play_lockstep(task, keys, sim, tracker_factory(n), skills, decide,
-                                 has_uncertainty(method.variant), n)
+                                 has_uncertainty(method.variant), n, **env_kwargs)
 
 
 def read_records(path: Path) -> list[dict[str, Any]]:

@@ -22,10 +22,11 @@ def _tril(covariance: np.ndarray) -> np.ndarray:
 
 
 def write_policy_video(path: Path, sim: SimConfig, tracker: Tracker, pick: Skill, drop: Skill, decide: Decide,
-                       uncertainty: bool, seed: int, fps: int = 8) -> dict[str, float]:
-    """Play one ``MOR/Rearrange-v0`` episode (reset seed ``seed``) with the hierarchy and write it to ``path``
-    (.mp4 or .gif); returns the episode's metrics."""
-    env = HierarchicalRearrange(make_task_env("decision", sim, render_frames=True), tracker, pick, drop, uncertainty)
+                       uncertainty: bool, seed: int, fps: int = 8, horizon: int | None = None) -> dict[str, float]:
+    """Play one ``MOR/Rearrange-v0`` episode (reset seed ``seed``; ``horizon`` caps its steps) with the hierarchy
+    and write it to ``path`` (.mp4 or .gif); returns the episode's metrics."""
+    env_kwargs = {} if horizon is None else {"horizon": horizon}
+    env = HierarchicalRearrange(make_task_env("decision", sim, True, **env_kwargs), tracker, pick, drop, uncertainty)
     frames: dict[str, list] = {name: [] for name in ("images", "poses", "objects", "agent_mean", "agent_tril",
                                                      "heading", "kappa", "object_mean", "object_tril")}
 

@@ -170,7 +170,7 @@ def train_policy(
     write_signature(out_dir / "meta.json", signature)
     if (out_dir / "log.csv").is_file():
         write_learning_curve(out_dir / "log.csv", out_dir / "learning_curve.png", label)
-    summary = {"label": label, "steps": int(model.num_timesteps), "seed": seed,
+    summary = {"label": label, "steps": int(model.num_timesteps), "seed": seed, "warm_start": init_from is not None,
                "wall_seconds_this_run": round(wall, 1),
                "steps_per_second_this_run": round(remaining / wall, 1) if remaining > 0 else None,
                "params": params.model_dump(), "signature": signature.model_dump()}

@@ -1,0 +1,66 @@
+"""A policy card (``cards/policy/<variant>/README.md``): what the variant's policies were trained with, their
+learning curves, and the evaluation rows of the methods built on them beside the paper's numbers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from mor.eval.paper import METRIC_NAMES, paper_row
+from mor.eval.tables import METRIC_LABELS
+
+_PPO_KEYS = ("steps", "n_envs", "hidden", "n_steps", "batch_size", "n_epochs", "learning_rate", "gamma", "gae_lambda",
+             "clip_range", "ent_coef")
+
+
+def _metric_cell(summary: dict[str, Any]) -> str:
+    low, high = summary["ci95"]
+    return f"{summary['mean']:.3f} ± {summary['std']:.3f} [{low:.3f}, {high:.3f}]"
+
+
+def policy_card_markdown(variant: str, summaries: dict[str, dict[str, Any]], rows: list[dict[str, Any]],
+                         video: str | None, profile: str) -> str:
+    """summaries: task -> the training's summary.json; rows: results rows of the methods using this variant."""
+    lines = [f"# Policy card: `{variant}`", "",
+             f"Profile `{profile}`. The pick and drop sub-policies (sb3-contrib MaskablePPO) and the decision policy "
+             "that chains them (paper section 4.2); observation layout and choices in `docs/assumptions.md` "
+             "(\"Policies\"). Load them with `mor.eval.methods.TrainedPolicies.load`; evaluate with "
+             f"`mor eval run --method {variant}`; watch one with `mor sim video --policy {variant}`.", "",
+             "## Training", "",
+             "| policy | steps | wall time (last run) | steps/s | warm start | " + " | ".join(_PPO_KEYS[1:]) + " |",
+             "|" + "---|" * (5 + len(_PPO_KEYS) - 1)]
+    for task, summary in summaries.items():
+        params = summary["params"]
+        warm = "from gt_pose" if summary.get("warm_start") else "–"
+        rate = summary.get("steps_per_second_this_run") or "–"
+        lines.append(f"| {task} | {summary['steps']:,} | {summary['wall_seconds_this_run']:.0f} s | {rate} | {warm} | "
+                     + " | ".join(str(params[k]) for k in _PPO_KEYS[1:]) + " |")
+    lines += ["", "Learning curves (success rate and return over the last 100 training episodes):", ""]
+    lines += [f"![{task}]({task}/learning_curve.png)" for task in summaries
+              if summaries[task].get("steps_per_second_this_run")]
+    lines += ["", "## Evaluation", ""]
+    if not rows:
+        lines.append("Not evaluated yet: run `mor eval run --method " + variant + "` then `mor eval results`.")
+    for row in rows:
+        reference = paper_row(row["method"])
+        lines += [f"`{row['method']}`: {len(row['seeds'])} seeds × {row['episodes_per_seed']} episodes per task "
+                  "(mean ± std over seeds [95% bootstrap interval]); *paper* = the paper's published number.", "",
+                  "| metric | ours | paper |", "|---|---|---|"]
+        for metric in METRIC_NAMES:
+            theirs = reference.get(metric) if reference else None
+            paper_text = f"{theirs[0]:.3f} ± {theirs[1]:.3f}" if theirs else "–"
+            lines.append(f"| {METRIC_LABELS[metric]} | {_metric_cell(row['metrics'][metric])} | {paper_text} |")
+        lines.append("")
+    if video:
+        lines += ["## An episode", "", f"[{video}]({video}): first-person view (left) and top-down view (right): "
+                  "the truth as stars, the policy's belief as 2σ ellipses (zero for gt_pose)."]
+    return "\n".join(lines) + "\n"
+
+
+def write_policy_card(folder: Path, variant: str, summaries: dict[str, dict[str, Any]], rows: list[dict[str, Any]],
+                      video: str | None, profile: str) -> Path:
+    from mor.atomic import atomic_output  # noqa: PLC0415
+
+    with atomic_output(folder / "README.md") as partial:
+        partial.write_text(policy_card_markdown(variant, summaries, rows, video, profile))
+    return folder / "README.md"
