@@ -69,6 +69,7 @@ app.add_typer(bench_app, name="bench")
 ProfileOption = Annotated[str | None, typer.Option(
     "--profile", "-p", help="params.yaml profile: tiny, default or paper (default: `profile:` in params.yaml).")]
 ParamsOption = Annotated[Path, typer.Option("--params", help="The parameters file.")]
+RepeatsOption = Annotated[int, typer.Option(min=1, help="Timed runs per measurement; the median is reported.")]
 TaskOption = Annotated[str, typer.Option("--task", "-t", help="pick, drop or rearrange.")]
 TASK_NAMES = ("pick", "drop", "rearrange")
 
@@ -394,7 +395,7 @@ def bench_collect(
 
 @bench_app.command("lnet")
 def bench_lnet(
-    repeats: Annotated[int, typer.Option(min=1, help="Timed runs per measurement; the median is reported.")] = 5,
+    repeats: RepeatsOption = 5,
     n_envs: Annotated[int, typer.Option(min=1, help="Environments of the streaming measurement.")] = 8,
     steps: Annotated[int, typer.Option(min=1, help="Vector steps per streaming run.")] = 50,
     out: Annotated[Path, typer.Option(help="JSON to write.")] = Path("datasets/bench/lnet.json"),

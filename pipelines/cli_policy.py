@@ -11,7 +11,7 @@ from mor.config import DEFAULT_PARAMS, active_profile, load_profile
 from mor.errors import ConfigError
 from mor.policy.names import TASKS, VARIANTS
 from pipelines import paths
-from pipelines.cli import ParamsOption, ProfileOption, app, bench_app, new_group
+from pipelines.cli import ParamsOption, ProfileOption, RepeatsOption, app, bench_app, new_group
 
 policy_app = new_group("Policies: train the pick, drop and decision policies of an observation variant.")
 eval_app = new_group("Evaluation: score methods with the protocol and gather the results card.")
@@ -67,7 +67,7 @@ def eval_results(profile: ProfileOption = None) -> None:
 @bench_app.command("policy")
 def bench_policy_command(
     seconds: Annotated[float, typer.Option(min=1.0, help="Seconds per measurement (bounds the run's time).")] = 10.0,
-    repeats: Annotated[int, typer.Option(min=1, help="Timed runs per measurement; the median is reported.")] = 3,
+    repeats: RepeatsOption = 3,
     out: Annotated[Path, typer.Option(help="JSON to write.")] = Path("datasets/bench/policy.json"),
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
