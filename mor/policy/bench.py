@@ -1,5 +1,6 @@
 """``mor bench policy``: in one run, the environment's step rate on the no-render path (gt_pose), with rendering
-and the L-Net at N envs, and PPO's training rate for gt_pose and for lnet (steps/s, medians over repeats)."""
+and the L-Net at N envs (environments in this process, and one process each), and PPO's training rate for each
+(steps/s, medians over repeats)."""
 
 from __future__ import annotations
 
@@ -45,18 +46,19 @@ def bench_policy(sim: SimConfig, params: PPOParams, runner: LNetRunner, seconds:
     """Steps/s of each path (``seconds`` each, ``repeats`` times; medians), all in this one process."""
     torch.set_num_threads(1)
     rng = np.random.default_rng(0)
-    gt = make_training_env("pick", "gt_pose", sim, params)
-    lnet = make_training_env("pick", "lnet", sim, params, runner)
-    runs: dict[str, list[float]] = {"env_gt_pose": [], "env_lnet": [], "ppo_gt_pose": [], "ppo_lnet": []}
+    envs = {"gt_pose": make_training_env("pick", "gt_pose", sim, params),
+            "lnet": make_training_env("pick", "lnet", sim, params.model_copy(update={"vec_env": "dummy"}), runner),
+            "lnet_subproc": make_training_env("pick", "lnet", sim, params.model_copy(update={"vec_env": "subproc"}),
+                                              runner)}
+    runs: dict[str, list[float]] = {f"{kind}_{name}": [] for kind in ("env", "ppo") for name in envs}
     for repeat in range(repeats):
-        runs["env_gt_pose"].append(_random_step_rate(gt, seconds, rng))
-        runs["env_lnet"].append(_random_step_rate(lnet, seconds, rng))
-        runs["ppo_gt_pose"].append(_ppo_rate(gt, params, seconds))
-        runs["ppo_lnet"].append(_ppo_rate(lnet, params, seconds))
+        for name, env in envs.items():
+            runs[f"env_{name}"].append(_random_step_rate(env, seconds, rng))
+            runs[f"ppo_{name}"].append(_ppo_rate(env, params, seconds))
         if progress:
             print(f"repeat {repeat + 1}/{repeats}: " + ", ".join(f"{k} {v[-1]:.0f}/s" for k, v in runs.items()))
-    gt.close()
-    lnet.close()
+    for env in envs.values():
+        env.close()
     return {"n_envs": params.n_envs, "image_size": sim.image_size, "seconds_per_measure": seconds,
             "repeats": repeats, "lnet_encoder": runner.config.encoder,
             "steps_per_second": {k: float(np.median(v)) for k, v in runs.items()},

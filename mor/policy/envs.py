@@ -45,20 +45,21 @@ def make_training_env(
 ) -> VecEnv:
     """``params.n_envs`` environments of ``task`` with ``variant``'s observation vector, for SB3.
 
-    gt_pose: ``PoseObservation`` envs without rendering, in one process (dummy) or one each (subproc). L-Net
-    variants: rendered envs in one process; for Pick/Drop ``LNetVecObservation`` runs one batched L-Net forward
-    per vector step, for the decision each env tracks its own belief (decisions last different numbers of steps).
+    gt_pose: ``PoseObservation`` envs without rendering. L-Net variants: for Pick/Drop rendered envs under
+    ``LNetVecObservation``, one batched L-Net forward per vector step in this process; for the decision each env
+    tracks its own belief (decisions last different numbers of steps) in this process. The envs run in this process
+    (``vec_env: dummy``) or one process each (``subproc``; not for the L-Net decision, whose tracker holds the model).
     """
     from mor.policy.lnet_tracking import LNetTracker, LNetVecObservation  # noqa: PLC0415 - torch only for L-Net
 
     uncertainty = has_uncertainty(variant)
+    vec_env = SubprocVecEnv if params.vec_env == "subproc" else DummyVecEnv
     if variant == "gt_pose":
-        makers = [lambda: make_policy_env(task, sim, GroundTruthTracker(), uncertainty, skills)] * params.n_envs
-        return SubprocVecEnv(makers) if params.vec_env == "subproc" else DummyVecEnv(makers)
+        return vec_env([lambda: make_policy_env(task, sim, GroundTruthTracker(), uncertainty, skills)] * params.n_envs)
     if runner is None:
         raise ValueError(f"variant {variant!r} needs the trained L-Net (runner)")
     if task == "decision":
         return DummyVecEnv([lambda: make_policy_env(task, sim, LNetTracker(runner), uncertainty, skills)]
                            * params.n_envs)
-    raw = DummyVecEnv([lambda: make_task_env(task, sim, render_frames=True)] * params.n_envs)
+    raw = vec_env([lambda: make_task_env(task, sim, render_frames=True)] * params.n_envs)
     return LNetVecObservation(raw, runner, task, sim.n_objects, uncertainty)

@@ -100,3 +100,20 @@ def test_a_policy_of_another_layout_is_one_clear_error(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"lnet_version='abc' but this run needs 'def'"):
         check_signature(tmp_path / "meta.json", PolicySignature.of("pick", "lnet", 2, "square", "def"))
     assert json.loads((tmp_path / "meta.json").read_text())["variant"] == "lnet"
+
+
+def test_the_policy_benchmark_measures_every_path_in_one_run() -> None:
+    import torch
+
+    from mor.lnet.calibration import Calibration
+    from mor.lnet.model import LNet
+    from mor.lnet.params import LNetConfig
+    from mor.lnet.runtime import LNetRunner
+    from mor.policy.bench import bench_policy
+
+    torch.manual_seed(0)
+    runner = LNetRunner(LNet(LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)), Calibration(), 16, "test")
+    result = bench_policy(SIM, TINY_PPO, runner, seconds=0.2, repeats=1, progress=False)
+    assert set(result["steps_per_second"]) == {f"{kind}_{name}" for kind in ("env", "ppo")
+                                               for name in ("gt_pose", "lnet", "lnet_subproc")}
+    assert all(rate > 0 for rate in result["steps_per_second"].values())
