@@ -33,6 +33,7 @@ class _Slot:
     observation: dict[str, Any] = field(default_factory=dict)
     info: dict[str, Any] = field(default_factory=dict)
     chain: SkillChain = field(default_factory=SkillChain)
+    rng: np.random.Generator = field(default_factory=np.random.default_rng)
     previous: int = -1
     starting: bool = True
     total: float = 0.0
@@ -78,6 +79,7 @@ def _start(slot: _Slot, queue: list[tuple[EpisodeKey, int]]) -> None:
         return
     slot.key, seed = queue.pop(0)
     slot.observation, slot.info = slot.env.reset(seed=seed)
+    slot.rng = np.random.default_rng(seed)  # the skills' draws: the same as HierarchicalRearrange's
     slot.chain, slot.previous, slot.total, slot.steps = SkillChain(), -1, 0.0, 0
 
 
@@ -107,7 +109,8 @@ def _act(slots: list[_Slot], active: list[int], belief: PoseBelief, task: str, s
         vectors = observation_vector(belief.take(np.array(group)), held, skill_task, goals, uncertainty,
                                      slots[group[0]].env.arena)
         masks = np.stack([skill_mask(skill_task)] * len(group))
-        actions.update(zip(group, skills[skill_task].act_batch(vectors, masks).tolist(), strict=True))
+        chosen = skills[skill_task].act_batch(vectors, masks, [slots[i].rng for i in group])
+        actions.update(zip(group, chosen.tolist(), strict=True))
     return actions
 
 

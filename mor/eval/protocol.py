@@ -22,7 +22,7 @@ from mor.eval.stats import summarize
 from mor.policy.belief import PoseBelief
 from mor.policy.envs import make_task_env
 from mor.policy.features import observation_vector
-from mor.policy.hierarchy import nearest_unfixed
+from mor.policy.hierarchy import decision_mask, nearest_unfixed
 from mor.policy.observations import BatchTracker, has_uncertainty
 from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
@@ -43,7 +43,7 @@ def decider(method: MethodSpec, policies: TrainedPolicies, arena: Arena) -> Deci
 
     def learned(belief: PoseBelief, held: np.ndarray, targets: np.ndarray) -> np.ndarray:
         vectors = observation_vector(belief, held, "decision", targets, uncertainty, arena)
-        return policies.decision.act_batch(vectors, np.ones((len(held), targets.shape[1]), dtype=bool))
+        return policies.decision.act_batch(vectors, decision_mask(belief.object_mean, targets))
 
     return learned
 

@@ -23,6 +23,7 @@ from mor.policy.belief import PoseBelief
 from mor.policy.features import observation_vector
 from mor.policy.names import Task
 from mor.policy.observations import Tracker, observation_space
+from mor.sim.metrics import is_fixed
 from mor.sim.rules import N_ACTIONS, Action
 from mor.sim.tasks import DropEnv, PickEnv, RearrangeEnv
 
@@ -41,11 +42,15 @@ POLICY_FILE = "policy.pth"  # a trained policy for inference: sb3-contrib's Mask
 
 
 class Skill:
-    """A frozen policy: ``act(vector (D,), mask (A,)) -> action`` from sb3-contrib's MaskablePPO (a trained
-    ``MaskablePPO`` or its ``MaskableActorCriticPolicy``: anything with ``predict(..., action_masks=...)``)."""
+    """A frozen policy from sb3-contrib's MaskablePPO (a trained ``MaskablePPO`` or its
+    ``MaskableActorCriticPolicy``): ``act(vector (D,), mask (A,), rng) -> action``.
+
+    deterministic: the most likely allowed action; otherwise an action drawn from the policy's distribution with
+    the caller's generator (one per episode, seeded by the episode: the draws do not depend on batching).
+    """
 
     def __init__(self, model: Any, deterministic: bool = True) -> None:
-        self.model = model
+        self.policy = getattr(model, "policy", model)
         self.deterministic = deterministic
 
     @classmethod
@@ -55,29 +60,36 @@ class Skill:
 
         return cls(MaskableActorCriticPolicy.load(path, device="cpu"), deterministic)
 
-    def act(self, vector: np.ndarray, mask: np.ndarray) -> int:
+    def act(self, vector: np.ndarray, mask: np.ndarray, rng: np.random.Generator | None = None) -> int:
         """vector (D,), mask (A,) -> one action."""
-        return int(self.act_batch(vector[None], mask[None])[0])
+        return int(self.act_batch(vector[None], mask[None], None if rng is None else [rng])[0])
 
-    def act_batch(self, vectors: np.ndarray, masks: np.ndarray) -> np.ndarray:
-        """vectors (k, D), masks (k, A) bool -> actions (k,): one forward pass for k environments."""
-        actions, _ = self.model.predict(vectors, action_masks=masks, deterministic=self.deterministic)
-        return np.asarray(actions, dtype=int).reshape(len(vectors))
+    def act_batch(self, vectors: np.ndarray, masks: np.ndarray, rngs: list[np.random.Generator] | None = None
+                  ) -> np.ndarray:
+        """vectors (k, D) (or a dict of (k, ...) arrays), masks (k, A) bool -> actions (k,): one forward pass."""
+        import torch  # noqa: PLC0415
+
+        observations, _ = self.policy.obs_to_tensor(vectors)
+        with torch.no_grad():
+            distribution = self.policy.get_distribution(observations, action_masks=masks)
+        probabilities = distribution.distribution.probs.cpu().numpy().astype(np.float64)
+        if self.deterministic or rngs is None:
+            return probabilities.argmax(-1)
+        return np.array([rng.choice(len(p), p=p / p.sum()) for p, rng in zip(probabilities, rngs, strict=True)])
 
 
-DecisionRule = Callable[[PoseBelief, np.ndarray], int]
+def decision_mask(object_means: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """(..., n) bool: the objects a decision may choose, those not believed (by their means) to lie at their
+    targets already (the success rule of ``mor.sim.metrics``); every object when all are believed placed."""
+    mask = ~is_fixed(object_means, targets)
+    return np.where(mask.any(-1, keepdims=True), mask, True)
 
 
 def nearest_unfixed(belief: PoseBelief, targets: np.ndarray) -> int:
-    """The rule-based decision: the nearest object (by the belief's means) not yet believed at its target."""
-    from mor.sim.metrics import is_fixed  # noqa: PLC0415
-
+    """The rule-based decision: of the objects ``decision_mask`` allows, the nearest to the agent (means)."""
     objects = belief.object_mean[0]
-    candidates = np.flatnonzero(~is_fixed(objects, targets))
-    if candidates.size == 0:
-        candidates = np.arange(objects.shape[0])
-    distances = np.linalg.norm(objects[candidates] - belief.agent_mean[0], axis=-1)
-    return int(candidates[int(np.argmin(distances))])
+    distances = np.linalg.norm(objects - belief.agent_mean[0], axis=-1)
+    return int(np.argmin(np.where(decision_mask(objects, targets), distances, np.inf)))
 
 
 @dataclass
@@ -129,12 +141,15 @@ class HierarchicalRearrange(gym.Env):
         self.observation_space = observation_space("decision", self.n_objects, uncertainty)
         self.action_space = spaces.Discrete(self.n_objects)
         self.chain = SkillChain()
+        self.skill_rng = np.random.default_rng()
         self._observation: dict[str, Any] = {}
         self.belief: PoseBelief | None = None
         self.on_step: Callable[[HierarchicalRearrange], None] | None = None  # e.g. a video recorder
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
+        if seed is not None:
+            self.skill_rng = np.random.default_rng(seed)  # the skills' draws, as in mor.eval.lockstep
         self._observation, info = self.env.reset(seed=seed, options=options)
         self.belief = self.tracker.start(self._observation, info)
         self.chain = SkillChain()
@@ -148,7 +163,8 @@ class HierarchicalRearrange(gym.Env):
         total, steps = 0.0, 0
         while True:
             task = self.chain.task
-            primitive = self.skills[task].act(self._vector(task, self.chain.goal(self.targets)), skill_mask(task))
+            vector = self._vector(task, self.chain.goal(self.targets))
+            primitive = self.skills[task].act(vector, skill_mask(task), self.skill_rng)
             self._observation, reward, terminated, truncated, info = self.env.step(primitive)
             self.belief = self.tracker.update(self._observation, info, primitive)
             self._notify()
@@ -158,7 +174,8 @@ class HierarchicalRearrange(gym.Env):
                 return self._vector("decision", self.targets), total, terminated, truncated, info
 
     def action_masks(self) -> np.ndarray:
-        return np.ones(self.n_objects, dtype=bool)
+        """(n,) bool: ``decision_mask`` of the current belief (objects believed placed are not chosen again)."""
+        return decision_mask(self.belief.object_mean[0], self.targets)
 
     def close(self) -> None:
         self.env.close()

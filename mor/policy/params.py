@@ -44,7 +44,8 @@ class PolicyParams(_Strict):
     drop: PPOParams = Field(default_factory=PPOParams)
     decision: PPOParams = Field(default_factory=lambda: PPOParams(
         steps=10_000, n_envs=4, n_steps=64, batch_size=64, hidden=[128, 128, 128, 128], checkpoint_every=2_000))
-    skills_deterministic: bool = Field(True, description="frozen skills act by their most likely action")
+    skills_deterministic: bool = Field(False, description="frozen skills act by their most likely action (True) or "
+                                                          "draw from their distribution with a per-episode generator")
     lnet_warm_start: bool = Field(True, description="L-Net variants start from the gt_pose policies (same layout; "
                                                     "uncertainty inputs zero-weighted) and train lnet_steps more")
     lnet_steps: dict[Task, int] = Field(default_factory=lambda: {"pick": 100_000, "drop": 100_000, "decision": 0},

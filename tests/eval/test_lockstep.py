@@ -38,11 +38,11 @@ class HashSkill:
     def __init__(self, final_action: int) -> None:
         self.final_action = final_action
 
-    def act_batch(self, vectors: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    def act_batch(self, vectors: np.ndarray, masks: np.ndarray, rngs=None) -> np.ndarray:
         codes = np.floor(np.abs(vectors).sum(-1) * 1000).astype(int)
         return np.where(codes % 5 == 0, self.final_action, codes % 3)
 
-    def act(self, vector: np.ndarray, mask: np.ndarray) -> int:
+    def act(self, vector: np.ndarray, mask: np.ndarray, rng=None) -> int:
         return int(self.act_batch(vector[None], mask[None])[0])
 
 
@@ -66,7 +66,8 @@ def _one_at_a_time(task: str, seed: int, tracker, policies: TrainedPolicies, met
     if task != "rearrange":
         env = make_policy_env(task, SIM, tracker, uncertainty=True, horizon=HORIZON)
         skill = policies.pick if task == "pick" else policies.drop
-        act = lambda vector: skill.act(vector, env.action_masks())  # noqa: E731
+        rng = np.random.default_rng(seed)  # as the lockstep player seeds each episode's draws
+        act = lambda vector: skill.act(vector, env.action_masks(), rng)  # noqa: E731
     else:
         env = make_policy_env("decision", SIM, tracker, True, (policies.pick, policies.drop), horizon=HORIZON)
         decide = decider(METHODS[method], policies, ARENA)
@@ -83,8 +84,11 @@ def _one_at_a_time(task: str, seed: int, tracker, policies: TrainedPolicies, met
 
 @pytest.mark.parametrize(("task", "method"), [("pick", "gt_pose"), ("drop", "gt_pose"), ("rearrange", "gt_pose"),
                                               ("rearrange", "gt_pose_nearest_rule")])
-def test_lockstep_equals_one_episode_at_a_time(task: str, method: str, policies: TrainedPolicies,
+@pytest.mark.parametrize("deterministic", [True, False])
+def test_lockstep_equals_one_episode_at_a_time(task: str, method: str, deterministic: bool, policies: TrainedPolicies,
                                                quick: TrainedPolicies) -> None:
+    for skill in (policies.pick, policies.drop):
+        skill.deterministic = deterministic  # sampled skills draw from each episode's own generator
     if task == "rearrange":  # keep the full task short: quick skills, the real decision policy or rule
         policies = TrainedPolicies(quick.pick, quick.drop, policies.decision)
     keys = [((task, 0, e), 100 + e) for e in range(3)]

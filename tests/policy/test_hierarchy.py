@@ -30,7 +30,7 @@ class OracleSkill:
     def __init__(self, task: str) -> None:
         self.task, self.env, self.goal, self.calls = task, None, None, []
 
-    def act(self, vector: np.ndarray, mask: np.ndarray) -> int:
+    def act(self, vector: np.ndarray, mask: np.ndarray, rng: np.random.Generator | None = None) -> int:
         base = self.env.env.unwrapped
         state = WorldState(base.state.agent_pose.copy(), base.state.object_positions(), base.state.held)
         oracle = Oracle(base.arena, base.noise)
