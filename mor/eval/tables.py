@@ -106,7 +106,7 @@ def _beats(ours: dict[str, Any] | None, theirs: tuple[float, float] | None, metr
 
 def table_markdown(spec: TableSpec, rows: list[dict[str, Any]]) -> str:
     """Markdown of one table: for each metric our cell (mean ± std over seeds [95% CI]) and the paper's."""
-    header = ["Method"] + [f"{METRIC_LABELS[m]} ours | paper" for m in METRIC_NAMES]
+    header = ["Method"] + [f"{METRIC_LABELS[m]} {side}" for m in METRIC_NAMES for side in ("ours", "(paper)")]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for line in spec.rows:
         row = find_row(rows, line.match)

@@ -1,0 +1,35 @@
+"""The paper's tables render from results.json rows, every cell in its column, missing rows named."""
+
+from __future__ import annotations
+
+import pytest
+
+from mor.errors import ConfigError
+from mor.eval.paper import METRIC_NAMES
+from mor.eval.tables import TABLES, require_complete, table_markdown
+
+
+def _row(method: str, value: float) -> dict:
+    summary = {"mean": value, "std": 0.01, "ci95": [value - 0.02, value + 0.02]}
+    return {"method": method, "encoder": None, "arena": "rect", "policy_arena": "rect", "n_objects": 3,
+            "seeds": [0, 1], "episodes_per_seed": 2, "train_steps": {"pick": 10},
+            "metrics": {name: summary for name in METRIC_NAMES}}
+
+
+def test_a_table_has_every_cell_in_its_column_and_the_papers_numbers_labelled() -> None:
+    rows = [_row("gt_pose", 0.9), _row("lnet", 0.2), _row("lnet_no_uncertainty", 0.1)]
+    lines = table_markdown(TABLES[2], rows).splitlines()
+    widths = {line.count("|") for line in lines if line.startswith("|")}
+    assert len(widths) == 1  # header, separator and rows alike
+    assert "(paper)" in lines[0]
+    gt = next(line for line in lines if line.startswith("| Policy w/ GT poses"))
+    assert "0.900 ± 0.010 [0.880, 0.920] ✓ | 0.795 ± 0.030" in gt  # ours beside the paper's Pick
+    lnet = next(line for line in lines if line.startswith("| Ours"))
+    assert "0.200 ± 0.010 [0.180, 0.220] ✗ | 0.707 ± 0.020" in lnet
+    require_complete(TABLES[2], rows)
+
+
+def test_a_table_with_rows_missing_names_them_and_the_commands() -> None:
+    with pytest.raises(ConfigError, match=r"Table 2: no results for .*mor eval run --method lnet_no_uncertainty"):
+        require_complete(TABLES[2], [_row("gt_pose", 0.9), _row("lnet", 0.2)])
+    assert "Not yet run: Policy w/o uncertainty" in table_markdown(TABLES[2], [_row("gt_pose", 0.9)])
