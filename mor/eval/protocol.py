@@ -75,6 +75,9 @@ def run_protocol(
     Learned methods play ``n_envs`` episodes in lockstep (``mor.eval.lockstep``) with a tracker from
     ``tracker_factory(n)``; the scripted ones play one at a time. ``horizon``: a cap on every episode's steps.
     """
+    import torch  # noqa: PLC0415
+
+    torch.set_num_threads(1)  # small batched forwards: one thread is several times faster on 2 cores (DESIGN.md)
     done = {(r["task"], r["seed"], r["episode"]): r for r in read_records(records_path)}
     todo = [key for key in episode_keys(seeds, episodes) if key not in done]
     with atomic_output(records_path) as partial:  # drop a line cut short by a kill before appending
