@@ -57,6 +57,7 @@ FEATURE_UNITS: dict[str, tuple[str, str]] = {
     "observation.target_positions": ("m, world frame", "target (x, y) of each object slot, 0 for an empty slot"),
     "state.agent_pose": ("m, m, rad; world frame", "ground-truth agent pose (x, y, heading)"),
     "state.object_positions": ("m, world frame", "ground-truth (x, y) of each object slot (held: the agent's)"),
+    "state.object_visible": ("0 / 1", "object slot in view by `mor.sim.rules.visible` (0 when held or empty)"),
     "action": ("action id", "action taken after this frame: 0 MOVE, 1 TURN_LEFT, 2 TURN_RIGHT, 3 PICK, 4 DROP; "
                             "-1 on an episode's last frame"),
 }
