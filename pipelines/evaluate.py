@@ -103,5 +103,5 @@ def write_policy_cards(profile: Profile, profile_name: str, video_seed: int = 0)
             continue
         mine = [r for r in rows if r["method"] in METHODS and METHODS[r["method"]].variant == variant]
         policy_video(profile, variant, video_seed, folder / "episode.mp4")
-        written.append(write_policy_card(folder, variant, summaries, mine, "episode.mp4", profile_name))
+        written.append(write_policy_card(folder, variant, summaries, mine, "episode.mp4", profile_name, rows))
     return written

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from mor.eval.paper import METRIC_NAMES, paper_row
+from mor.eval.paper import LOWER_IS_BETTER, METRIC_NAMES, paper_row
 from mor.eval.tables import METRIC_LABELS
 
 _PPO_KEYS = ("steps", "n_envs", "hidden", "n_steps", "batch_size", "n_epochs", "learning_rate", "gamma", "gae_lambda",
@@ -18,9 +18,28 @@ def _metric_cell(summary: dict[str, Any]) -> str:
     return f"{summary['mean']:.3f} ± {summary['std']:.3f} [{low:.3f}, {high:.3f}]"
 
 
+def uncertainty_comparison(rows: list[dict[str, Any]]) -> list[str]:
+    """Table lines comparing the ``lnet`` and ``lnet_no_uncertainty`` rows metric by metric: which is better where
+    their 95% intervals do not overlap, "no difference shown" where they do; [] when either row is missing."""
+    found = {row["method"]: row for row in rows if row["method"] in ("lnet", "lnet_no_uncertainty")}
+    if len(found) < 2:
+        return []
+    lines = []
+    for metric in METRIC_NAMES:
+        with_, without = found["lnet"]["metrics"][metric], found["lnet_no_uncertainty"]["metrics"][metric]
+        if with_["ci95"][0] > without["ci95"][1] or with_["ci95"][1] < without["ci95"][0]:
+            higher = "lnet" if with_["mean"] > without["mean"] else "lnet_no_uncertainty"
+            verdict = f"{higher} higher" + (" (worse)" if metric in LOWER_IS_BETTER else "")
+        else:
+            verdict = "no difference shown"
+        lines.append(f"| {METRIC_LABELS[metric]} | {_metric_cell(with_)} | {_metric_cell(without)} | {verdict} |")
+    return lines
+
+
 def policy_card_markdown(variant: str, summaries: dict[str, dict[str, Any]], rows: list[dict[str, Any]],
-                         video: str | None, profile: str) -> str:
-    """summaries: task -> the training's summary.json; rows: results rows of the methods using this variant."""
+                         video: str | None, profile: str, all_rows: list[dict[str, Any]] = ()) -> str:
+    """summaries: task -> the training's summary.json; rows: results rows of the methods using this variant;
+    all_rows: every results row (for the with/without-uncertainty comparison)."""
     lines = [f"# Policy card: `{variant}`", "",
              f"Profile `{profile}`. The pick and drop sub-policies (sb3-contrib MaskablePPO) and the decision policy "
              "that chains them (paper section 4.2); observation layout and choices in `docs/assumptions.md` "
@@ -51,6 +70,11 @@ def policy_card_markdown(variant: str, summaries: dict[str, dict[str, Any]], row
             paper_text = f"{theirs[0]:.3f} ± {theirs[1]:.3f}" if theirs else "–"
             lines.append(f"| {METRIC_LABELS[metric]} | {_metric_cell(row['metrics'][metric])} | {paper_text} |")
         lines.append("")
+    comparison = uncertainty_comparison(all_rows) if variant in ("lnet", "lnet_no_uncertainty") else []
+    if comparison:
+        lines += ["## Does the uncertainty help? (`lnet` against `lnet_no_uncertainty`, same episodes)", "",
+                  "| metric | lnet | lnet_no_uncertainty | verdict (95% intervals) |", "|---|---|---|---|", *comparison,
+                  ""]
     if video:
         lines += ["## An episode", "", f"[{video}]({video}): first-person view (left) and top-down view (right): "
                   "the truth as stars, the policy's belief as 2σ ellipses (zero for gt_pose)."]
@@ -58,9 +82,9 @@ def policy_card_markdown(variant: str, summaries: dict[str, dict[str, Any]], row
 
 
 def write_policy_card(folder: Path, variant: str, summaries: dict[str, dict[str, Any]], rows: list[dict[str, Any]],
-                      video: str | None, profile: str) -> Path:
+                      video: str | None, profile: str, all_rows: list[dict[str, Any]] = ()) -> Path:
     from mor.atomic import atomic_output  # noqa: PLC0415
 
     with atomic_output(folder / "README.md") as partial:
-        partial.write_text(policy_card_markdown(variant, summaries, rows, video, profile))
+        partial.write_text(policy_card_markdown(variant, summaries, rows, video, profile, all_rows))
     return folder / "README.md"

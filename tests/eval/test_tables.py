@@ -33,3 +33,15 @@ def test_a_table_with_rows_missing_names_them_and_the_commands() -> None:
     with pytest.raises(ConfigError, match=r"Table 2: no results for .*mor eval run --method lnet_no_uncertainty"):
         require_complete(TABLES[2], [_row("gt_pose", 0.9), _row("lnet", 0.2)])
     assert "Not yet run: Policy w/o uncertainty" in table_markdown(TABLES[2], [_row("gt_pose", 0.9)])
+
+
+def test_the_policy_card_compares_with_and_without_uncertainty_by_their_intervals() -> None:
+    from mor.eval.policy_card import uncertainty_comparison
+
+    lines = uncertainty_comparison([_row("lnet", 0.5), _row("lnet_no_uncertainty", 0.3), _row("gt_pose", 0.9)])
+    assert len(lines) == len(METRIC_NAMES)
+    assert lines[0].endswith("| lnet higher |")
+    assert lines[-1].endswith("| lnet higher (worse) |")  # %E: lower is better
+    close = uncertainty_comparison([_row("lnet", 0.5), _row("lnet_no_uncertainty", 0.49)])
+    assert all(line.endswith("| no difference shown |") for line in close)
+    assert uncertainty_comparison([_row("lnet", 0.5)]) == []
