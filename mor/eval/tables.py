@@ -146,7 +146,7 @@ def write_table_figure(spec: TableSpec, rows: list[dict[str, Any]], path: Path) 
         if line.paper:
             bars.append((f"paper: {line.label}", [v[0] if v else np.nan for v in line.paper],
                          np.array([v[1] if v else 0.0 for v in line.paper]), "//"))
-    figure, ax = plt.subplots(figsize=(11, 4.2))
+    figure, ax = plt.subplots(figsize=(11, 5.2))
     width = 0.8 / len(bars)
     x = np.arange(len(METRIC_NAMES))
     for k, (label, means, errors, hatch) in enumerate(bars):
@@ -155,7 +155,7 @@ def write_table_figure(spec: TableSpec, rows: list[dict[str, Any]], path: Path) 
     ax.set_xticks(x, [METRIC_LABELS[m] for m in METRIC_NAMES])
     ax.set_ylim(0, 1.05)
     ax.set_title(f"Table {spec.number}: {spec.title}")
-    ax.legend(fontsize=7, ncol=2, loc="upper right")
+    ax.legend(fontsize=7, ncol=2, loc="upper center", bbox_to_anchor=(0.5, -0.08))  # below: never over a bar
     ax.grid(axis="y", alpha=0.3)
     figure.tight_layout()
     with atomic_output(path) as partial:
