@@ -8,7 +8,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mor.atomic import atomic_output
 from mor.config import Profile
 from mor.eval.card import write_results_card
 from mor.eval.methods import METHODS, MethodSpec, TrainedPolicies, method_spec
@@ -21,12 +20,8 @@ from mor.errors import ConfigError
 from mor.policy.observations import BatchTracker, GroundTruthBatchTracker, SingleTracker, has_uncertainty
 from mor.sim.arena import Arena
 from pipelines import paths
+from pipelines.io import write_json
 from pipelines.train_policy import lnet_runner
-
-
-def _write_json(path: Path, payload: Any) -> None:
-    with atomic_output(path) as partial:
-        partial.write_text(json.dumps(payload, indent=2) + "\n")
 
 
 def load_method(profile: Profile, method: MethodSpec) -> tuple[TrainedPolicies, Callable[[int], BatchTracker]]:
@@ -59,7 +54,7 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
            "policy_arena": arena_label(sim.arena), "n_objects": sim.n_objects, "seeds": protocol.seeds,
            "episodes_per_seed": protocol.episodes, "train_steps": train_steps,
            "metrics": metric_summaries(records, protocol.bootstrap_resamples), "profile": profile_name}
-    _write_json(paths.RESULTS_CARD / "rows" / f"{method.name}.json", row)
+    write_json(paths.RESULTS_CARD / "rows" / f"{method.name}.json", row)
     return row
 
 
@@ -85,7 +80,7 @@ def collect_results(profile_name: str) -> Path:
         existing = {"profile": profile_name, "rows": []}
     merged = merge_rows(existing["rows"], [r for r in rows if r.get("profile") == profile_name])
     results = {"profile": profile_name, "row_keys": list(ROW_KEYS), "rows": merged}
-    _write_json(path, results)
+    write_json(path, results)
     write_results_card(results, paths.RESULTS_CARD)
     return path
 

@@ -48,14 +48,16 @@ def decider(method: MethodSpec, policies: TrainedPolicies, arena: Arena) -> Deci
     return learned
 
 
-def _play_scripted(method: MethodSpec, task: str, sim: SimConfig, seed: int, env_kwargs: dict[str, Any]
-                   ) -> dict[str, Any]:
+def _play_scripted(method: MethodSpec, task: str, sim: SimConfig, keys: list[tuple[Any, int]],
+                   env_kwargs: dict[str, Any]) -> Iterator[tuple[Any, dict[str, Any]]]:
+    """The scripted policies, one episode at a time in one environment of ``task``."""
     env = make_task_env("decision" if task == "rearrange" else task, sim, render_frames=False, **env_kwargs)
     try:
-        record = run_episode(env, make_policy(method.name, env, seed=seed), seed)
+        for key, seed in keys:
+            record = run_episode(env, make_policy(method.name, env, seed=seed), seed)
+            yield key, {"metrics": record.metrics, "steps": record.steps, "return": record.episode_return}
     finally:
         env.close()
-    return {"metrics": record.metrics, "steps": record.steps, "return": record.episode_return}
 
 
 def episode_keys(seeds: list[int], episodes: int) -> Iterator[tuple[str, int, int]]:
@@ -104,8 +106,7 @@ def _play(method: MethodSpec, sim: SimConfig, todo: list[tuple[str, int, int]], 
         if not keys:
             continue
         if method.decision == "scripted":
-            for key, seed in keys:
-                yield key, _play_scripted(method, task, sim, seed, env_kwargs)
+            yield from _play_scripted(method, task, sim, keys, env_kwargs)
             continue
         n = min(n_envs, len(keys))
         skills = {"pick": policies.pick, "drop": policies.drop}

@@ -17,6 +17,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import torch
 from gymnasium import spaces
 
 from mor.policy.belief import PoseBelief
@@ -67,8 +68,6 @@ class Skill:
     def act_batch(self, vectors: np.ndarray, masks: np.ndarray, rngs: list[np.random.Generator] | None = None
                   ) -> np.ndarray:
         """vectors (k, D) (or a dict of (k, ...) arrays), masks (k, A) bool -> actions (k,): one forward pass."""
-        import torch  # noqa: PLC0415
-
         observations, _ = self.policy.obs_to_tensor(vectors)
         with torch.no_grad():
             distribution = self.policy.get_distribution(observations, action_masks=masks)
