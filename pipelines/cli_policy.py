@@ -9,10 +9,11 @@ import typer
 
 from mor.config import DEFAULT_PARAMS, active_profile, load_profile
 from mor.errors import ConfigError
-from mor.policy.names import TASKS, VARIANTS
+from mor.policy.names import BASELINE_VARIANTS, TASKS, VARIANTS
 from pipelines import paths
 from pipelines.cli import ParamsOption, ProfileOption, RepeatsOption, app, bench_app, new_group
 
+TRAINABLE = VARIANTS + BASELINE_VARIANTS
 policy_app = new_group("Policies: train the pick, drop and decision policies of an observation variant.")
 eval_app = new_group("Evaluation: score methods with the protocol and gather the results card.")
 app.add_typer(policy_app, name="policy")
@@ -21,7 +22,7 @@ app.add_typer(eval_app, name="eval")
 
 @policy_app.command("train")
 def policy_train(
-    variant: Annotated[str, typer.Option("--variant", "-v", help=f"One of {', '.join(VARIANTS)}.")],
+    variant: Annotated[str, typer.Option("--variant", "-v", help=f"One of {', '.join(TRAINABLE)}.")],
     task: Annotated[list[str] | None, typer.Option("--task", "-t", help="pick, drop, decision (repeat; default: all, "
                                                                          "in that order).")] = None,
     profile: ProfileOption = None,
@@ -30,8 +31,8 @@ def policy_train(
     """Train (or resume) a variant's policies; outputs in datasets/policy/<variant>/ and cards/policy/<variant>/."""
     from pipelines import train_policy  # noqa: PLC0415
 
-    if variant not in VARIANTS:
-        raise ConfigError(f"--variant: unknown variant {variant!r}; choose one of {', '.join(VARIANTS)}")
+    if variant not in TRAINABLE:
+        raise ConfigError(f"--variant: unknown variant {variant!r}; choose one of {', '.join(TRAINABLE)}")
     tasks = tuple(task or TASKS)
     for name in tasks:
         if name not in TASKS:

@@ -17,7 +17,8 @@ from mor.eval.video import write_policy_video
 from mor.eval.results import ROW_KEYS, arena_label, merge_rows
 from mor.policy.names import TASKS, VARIANTS
 from mor.errors import ConfigError
-from mor.policy.observations import BatchTracker, GroundTruthBatchTracker, SingleTracker, has_uncertainty
+from mor.policy.observations import (BatchTracker, GroundTruthBatchTracker, RenderingTruthTracker, SingleTracker,
+                                     has_uncertainty)
 from mor.sim.arena import Arena
 from pipelines import paths
 from pipelines.io import write_json
@@ -27,6 +28,10 @@ from pipelines.train_policy import lnet_runner
 def load_method(profile: Profile, method: MethodSpec) -> tuple[TrainedPolicies, Callable[[int], BatchTracker]]:
     """A learned method's committed policies (checked against what they were trained on) and its tracker factory."""
     sim = profile.sim
+    if method.decision == "object_order":
+        policies = TrainedPolicies.load_baseline(paths.POLICY_CARD, method.variant, sim.n_objects, sim.arena,
+                                                 sim.image_size, profile.policy.skills_deterministic)
+        return policies, lambda n: RenderingTruthTracker()
     runner = lnet_runner(method.variant)
     version = runner.dataset_version if runner is not None else None
     policies = TrainedPolicies.load(paths.POLICY_CARD, method.variant, sim.n_objects, sim.arena, version,
@@ -39,18 +44,29 @@ def load_method(profile: Profile, method: MethodSpec) -> tuple[TrainedPolicies, 
     return policies, lambda n: LNetBatchTracker(runner, n)
 
 
+def policy_folders(method: MethodSpec) -> dict[str, Path]:
+    """The committed folder of each policy a learned method plays (a baseline's pick is ``PICK_FROM``'s)."""
+    if method.decision == "object_order":
+        from mor.policy.baselines import PICK_FROM  # noqa: PLC0415 - torch only here
+
+        return {"pick": paths.POLICY_CARD / PICK_FROM / "pick", "drop": paths.POLICY_CARD / method.variant / "drop"}
+    tasks = [task for task in TASKS if task != "decision" or method.decision == "learned"]
+    return {task: paths.POLICY_CARD / method.variant / task for task in tasks}
+
+
 def run(profile: Profile, profile_name: str, method_name: str, progress: bool = True) -> dict[str, Any]:
     """Evaluate ``method_name`` with the profile's protocol; write its row to ``cards/results/rows/``."""
     method = method_spec(method_name)
     sim, protocol = profile.sim, profile.evaluate
     policies, tracker_factory, train_steps = None, None, None
+    baseline = method.decision == "object_order"
     if method.variant is not None:
         policies, tracker_factory = load_method(profile, method)
-        train_steps = {task: json.loads((paths.POLICY_CARD / method.variant / task / "summary.json").read_text())
-                       ["steps"] for task in TASKS if task != "decision" or method.decision == "learned"}
+        train_steps = {task: json.loads((folder / "summary.json").read_text())["steps"]
+                       for task, folder in policy_folders(method).items()}
     records = run_protocol(method, sim, protocol.seeds, protocol.episodes, paths.EVAL / f"{method.name}.jsonl",
                            policies, tracker_factory, protocol.n_envs, progress, protocol.horizon)
-    row = {"method": method.name, "encoder": None, "arena": arena_label(sim.arena),
+    row = {"method": method.name, "encoder": profile.policy.baseline.encoder if baseline else None, "arena": arena_label(sim.arena),
            "policy_arena": arena_label(sim.arena), "n_objects": sim.n_objects, "seeds": protocol.seeds,
            "episodes_per_seed": protocol.episodes, "train_steps": train_steps,
            "metrics": metric_summaries(records, protocol.bootstrap_resamples), "profile": profile_name}

@@ -12,9 +12,9 @@ from pathlib import Path
 from typing import Any
 
 from mor.config import Profile
-from mor.policy.envs import make_training_env
+from mor.policy.envs import make_baseline_training_env, make_training_env
 from mor.policy.hierarchy import POLICY_FILE, Skill
-from mor.policy.names import TASKS, Task, Variant
+from mor.policy.names import BASELINE_VARIANTS, TASKS, BaselineVariant, Task, Variant
 from mor.policy.signature import PolicySignature
 from mor.policy.train import train_policy
 from pipelines import paths
@@ -39,8 +39,32 @@ def publish(run_dir: Path, card_dir: Path) -> None:
             shutil.copyfile(run_dir / name, card_dir / name)
 
 
-def run(profile: Profile, variant: Variant, tasks: tuple[Task, ...] = TASKS, progress: bool = True) -> list[dict]:
+def run_baseline(profile: Profile, variant: BaselineVariant, tasks: tuple[Task, ...], progress: bool = True
+                 ) -> list[dict]:
+    """Train the baseline's own skills among ``tasks`` (``baseline_tasks``: the others reuse baseline_img's Pick;
+    a baseline has no decision policy); resumable."""
+    from mor.policy.baselines import BaselineExtractor, baseline_tasks  # noqa: PLC0415 - torch only here
+
+    settings, sim, summaries = profile.policy.baseline, profile.sim, []
+    extractor = {"features_extractor_class": BaselineExtractor,
+                 "features_extractor_kwargs": {"encoder": settings.encoder, "image_features": settings.image_features}}
+    for task in (t for t in baseline_tasks(variant) if t in tasks):
+        params = getattr(settings, task)
+        signature = PolicySignature.of_baseline(task, variant, sim.n_objects, sim.arena, sim.image_size)
+        run_dir = paths.POLICIES / variant / task
+        summary = train_policy(lambda: make_baseline_training_env(task, variant, sim, params),  # noqa: B023
+                               params, signature, run_dir, profile.policy.seed, f"{variant} {task}", progress,
+                               policy_kwargs=extractor)
+        publish(run_dir, paths.POLICY_CARD / variant / task)
+        summaries.append({**summary, "encoder": settings.encoder})
+    return summaries
+
+
+def run(profile: Profile, variant: Variant | BaselineVariant, tasks: tuple[Task, ...] = TASKS, progress: bool = True
+        ) -> list[dict]:
     """Train ``tasks`` of ``variant`` in order (the decision needs the pick and drop skills); resumable."""
+    if variant in BASELINE_VARIANTS:
+        return run_baseline(profile, variant, tasks, progress)
     runner = lnet_runner(variant)
     version = runner.dataset_version if runner is not None else None
     summaries = []

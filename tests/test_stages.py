@@ -106,3 +106,24 @@ def test_an_unknown_ablation_study_is_one_clear_line(workspace: Path) -> None:
     assert result.exit_code == 2
     assert result.output.strip().splitlines() == [
         "error: --study: unknown study 'colour'; choose one of actions, object_head, tracker"]
+
+
+def test_baseline_stages_train_evaluate_and_fill_table_1(workspace: Path) -> None:
+    """A tiny baseline trains for a few steps and is scored by the protocol; the others reuse its Pick."""
+    tiny = yaml.safe_load((workspace / "params.yaml").read_text())["profiles"]["tiny"]
+    _run("policy", "train", "--variant", "baseline_img", "--profile", "tiny")
+    _run("policy", "train", "--variant", "baseline_landmark", "--profile", "tiny")
+    assert (workspace / "cards/policy/baseline_img/pick/policy.pth").is_file()
+    assert not (workspace / "cards/policy/baseline_landmark/pick").exists()
+    _run("eval", "run", "--method", "baseline_landmark", "--profile", "tiny")
+    protocol = tiny["evaluate"]
+    records = (workspace / "datasets/eval/baseline_landmark.jsonl").read_text().splitlines()
+    assert len(records) == 3 * len(protocol["seeds"]) * protocol["episodes"]
+    missing = CliRunner().invoke(app, ["eval", "run", "--method", "baseline_delta_pose", "--profile", "tiny"])
+    assert missing.exit_code == 2 and "baseline_delta_pose/drop/meta.json" in missing.output
+    _run("eval", "results", "--profile", "tiny")
+    row = json.loads((workspace / "cards/results/results.json").read_text())["rows"][0]
+    assert row["method"] == "baseline_landmark" and row["encoder"] == tiny["policy"]["baseline"]["encoder"]
+    assert row["train_steps"] == {"pick": 64, "drop": 64}
+    readme = (workspace / "cards/results/README.md").read_text()
+    assert "| Baseline: CNN + Landmark (paper: ResNet18 + Landmark) [ours: compact] |" in readme

@@ -19,10 +19,26 @@ from mor.policy.features import observation_vector
 from mor.policy.names import Task
 from mor.policy.hierarchy import Skill, SkillChain, skill_mask
 from mor.policy.observations import BatchTracker, task_goal
+from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
 
-#: (beliefs of k envs, held (k,), targets (k, n, 2)) -> the object each should rearrange next (k,)
-Decide = Callable[[PoseBelief, np.ndarray, np.ndarray], np.ndarray]
+#: (beliefs of k envs, held (k,), targets (k, n, 2), last (k,): the object of each env's previous decision, -1
+#: before the first) -> the object each should rearrange next (k,)
+Decide = Callable[[PoseBelief, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+#: (skill task, the k envs' MOR observations, their infos, their beliefs, goals (k, ...), arena) -> the skill's
+#: batched input: the pose policies' vectors (k, D) (``pose_inputs``) or a baseline's dict of (k, ...) arrays
+Encode = Callable[[Task, list[dict[str, Any]], list[dict[str, Any]], PoseBelief, np.ndarray, Arena],
+                  np.ndarray | dict[str, np.ndarray]]
+
+
+def pose_inputs(uncertainty: bool) -> Encode:
+    """The pose policies' encoding: ``observation_vector`` of the beliefs (with or without their uncertainty)."""
+    def encode(task: Task, observations: list[dict[str, Any]], infos: list[dict[str, Any]], belief: PoseBelief,
+               goals: np.ndarray, arena: Arena) -> np.ndarray:
+        held = np.array([o["held"] for o in observations])
+        return observation_vector(belief, held, task, goals, uncertainty, arena)
+
+    return encode
 EpisodeKey = tuple[Any, ...]
 
 
@@ -42,10 +58,10 @@ class _Slot:
 
 def play_lockstep(
     task: str, keys: list[tuple[EpisodeKey, int]], sim: SimConfig, tracker: BatchTracker, skills: dict[Task, Skill],
-    decide: Decide | None, uncertainty: bool, n_envs: int, **env_kwargs: Any,
+    decide: Decide | None, encode: Encode, n_envs: int, **env_kwargs: Any,
 ) -> Iterator[tuple[EpisodeKey, dict[str, Any]]]:
-    """Play ``keys`` ((key, reset seed) pairs) of ``task`` (pick, drop or rearrange) with the skills (and, for
-    rearrange, ``decide``); yield (key, {metrics, steps, return}) as each episode ends. ``tracker`` must keep
+    """Play ``keys`` ((key, reset seed) pairs) of ``task`` (pick, drop or rearrange) with the skills, fed by
+    ``encode`` (and, for rearrange, ``decide``); yield (key, {metrics, steps, return}) as each episode ends. ``tracker`` must keep
     ``min(n_envs, len(keys))`` environments; ``env_kwargs`` go to the environments (e.g. ``horizon``)."""
     queue = list(keys)
     env_task = "decision" if task == "rearrange" else task
@@ -60,7 +76,7 @@ def play_lockstep(
             active = [i for i, s in enumerate(slots) if s.key is not None]
             if task == "rearrange":
                 _decide(slots, [i for i in active if slots[i].chain.task is None], belief, decide)
-            actions = _act(slots, active, belief, task, skills, uncertainty)
+            actions = _act(slots, active, belief, task, skills, encode)
             for i in active:
                 finished = _advance(slots[i], task, actions[i])
                 if finished is not None:
@@ -89,12 +105,13 @@ def _decide(slots: list[_Slot], due: list[int], belief: PoseBelief, decide: Deci
     held = np.array([slots[i].observation["held"] for i in due])
     targets = np.stack([slots[i].observation["target_positions"] for i in due])
     n_objects = targets.shape[1]
-    for i, choice in zip(due, decide(belief.take(np.array(due)), held, targets), strict=True):
+    last = np.array([slots[i].chain.index for i in due])
+    for i, choice in zip(due, decide(belief.take(np.array(due)), held, targets, last), strict=True):
         slots[i].chain.decide(int(choice), int(slots[i].observation["held"]), n_objects)
 
 
 def _act(slots: list[_Slot], active: list[int], belief: PoseBelief, task: str, skills: dict[Task, Skill],
-         uncertainty: bool) -> dict[int, int]:
+         encode: Encode) -> dict[int, int]:
     """Each active slot's next primitive action: one batched forward per skill."""
     actions: dict[int, int] = {}
     for skill_task in ("pick", "drop"):
@@ -105,11 +122,10 @@ def _act(slots: list[_Slot], active: list[int], belief: PoseBelief, task: str, s
             goals = np.stack([slots[i].chain.goal(np.asarray(slots[i].observation["target_positions"])) for i in group])
         else:
             goals = np.stack([task_goal(slots[i].observation, skill_task) for i in group])
-        held = np.array([slots[i].observation["held"] for i in group])
-        vectors = observation_vector(belief.take(np.array(group)), held, skill_task, goals, uncertainty,
-                                     slots[group[0]].env.arena)
+        inputs = encode(skill_task, [slots[i].observation for i in group], [slots[i].info for i in group],
+                        belief.take(np.array(group)), goals, slots[group[0]].env.arena)
         masks = np.stack([skill_mask(skill_task)] * len(group))
-        chosen = skills[skill_task].act_batch(vectors, masks, [slots[i].rng for i in group])
+        chosen = skills[skill_task].act_batch(inputs, masks, [slots[i].rng for i in group])
         actions.update(zip(group, chosen.tolist(), strict=True))
     return actions
 

@@ -1,7 +1,8 @@
 """The methods the protocol can score, by name, and loading a method's trained policies.
 
 A learned method is an observation variant (``mor.policy.observations.VARIANTS``) with its pick, drop and
-decision policies; ``*_nearest_rule`` replaces the learned decision by the nearest-unfixed-object rule;
+decision policies; ``*_nearest_rule`` replaces the learned decision by the nearest-unfixed-object rule; the
+baselines (``mor.policy.baselines``) chain their pixel-fed pick and drop skills in object order;
 ``oracle`` and ``random`` are the simulator's scripted policies.
 """
 
@@ -13,16 +14,16 @@ from typing import Literal
 
 from mor.errors import ConfigError
 from mor.policy.hierarchy import POLICY_FILE, Skill
-from mor.policy.names import TASKS, Task, Variant
+from mor.policy.names import BASELINE_VARIANTS, TASKS, BaselineVariant, Task, Variant
 from mor.policy.signature import PolicySignature, check_signature
 
-Decision = Literal["learned", "nearest_rule", "scripted"]
+Decision = Literal["learned", "nearest_rule", "object_order", "scripted"]
 
 
 @dataclass(frozen=True)
 class MethodSpec:
     name: str
-    variant: Variant | None  # None for the scripted policies
+    variant: Variant | BaselineVariant | None  # None for the scripted policies
     decision: Decision
 
 
@@ -32,6 +33,7 @@ METHODS: dict[str, MethodSpec] = {spec.name: spec for spec in (
     MethodSpec("lnet_no_uncertainty", "lnet_no_uncertainty", "learned"),
     MethodSpec("gt_pose_nearest_rule", "gt_pose", "nearest_rule"),
     MethodSpec("lnet_nearest_rule", "lnet", "nearest_rule"),
+    *(MethodSpec(name, name, "object_order") for name in BASELINE_VARIANTS),
     MethodSpec("oracle", None, "scripted"),
     MethodSpec("random", None, "scripted"),
 )}
@@ -67,3 +69,17 @@ class TrainedPolicies:
             check_signature(folder / "meta.json", PolicySignature.of(task, variant, n_objects, arena, lnet_version))
             skills[task] = Skill.load(folder / POLICY_FILE, deterministic)
         return cls(skills["pick"], skills["drop"], skills["decision"])
+
+    @classmethod
+    def load_baseline(cls, root: Path, variant: BaselineVariant, n_objects: int, arena: str, image_size: int,
+                      deterministic: bool = True) -> TrainedPolicies:
+        """A baseline's skills: ``PICK_FROM``'s pick and its own drop, each checked against its ``meta.json``."""
+        from mor.policy.baselines import PICK_FROM  # noqa: PLC0415 - torch only here
+
+        skills = {}
+        for task, owner in (("pick", PICK_FROM), ("drop", variant)):
+            folder = policy_dir(root, owner, task)
+            check_signature(folder / "meta.json",
+                            PolicySignature.of_baseline(task, owner, n_objects, arena, image_size))
+            skills[task] = Skill.load(folder / POLICY_FILE, deterministic)
+        return cls(skills["pick"], skills["drop"], None)

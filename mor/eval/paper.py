@@ -14,6 +14,7 @@ _Row = tuple[tuple[float, float] | None, ...]
 
 TABLE1: dict[str, _Row] = {
     "Policy w/ GT poses": ((0.795, 0.030), (0.737, 0.017), (0.476, 0.016), (0.603, 0.012), (0.442, 0.011)),
+    "ResNet18 + Img": (None, None, None, None, None),  # the paper's × (fails) for Drop and the full task
     "ResNet18 + ΔPose": ((0.272, 0.013), (0.724, 0.028), (0.0132, 0.007), (0.303, 0.010), (0.749, 0.007)),
     "ResNet18 + Landmark": (None, (0.671, 0.029), (0.0036, 0.002), (0.285, 0.006), (0.770, 0.011)),
     "ResNet50 + ΔPose": ((0.413, 0.017), (0.717, 0.020), (0.124, 0.008), (0.350, 0.026), (0.646, 0.024)),

@@ -16,11 +16,12 @@ import numpy as np
 from tqdm import tqdm
 
 from mor.atomic import atomic_output
-from mor.eval.lockstep import Decide, play_lockstep
+from mor.eval.lockstep import Decide, Encode, play_lockstep, pose_inputs
 from mor.eval.methods import MethodSpec, TrainedPolicies
 from mor.eval.stats import summarize
 from mor.policy.belief import PoseBelief
-from mor.policy.envs import make_task_env
+from mor.policy.baselines import baseline_inputs
+from mor.policy.envs import baseline_sim, make_task_env
 from mor.policy.features import observation_vector
 from mor.policy.hierarchy import decision_mask, nearest_unfixed
 from mor.policy.observations import BatchTracker, has_uncertainty
@@ -35,17 +36,32 @@ METRICS = {"pick_success": ("pick", "success"), "drop_success": ("drop", "succes
 
 
 def decider(method: MethodSpec, policies: TrainedPolicies, arena: Arena) -> Decide:
-    """The method's decision for k envs at once: its learned decision policy, or the nearest-unfixed rule."""
+    """The method's decision for k envs at once: its learned decision policy, the nearest-unfixed rule, or (the
+    baselines, which hold no pose estimate) the object after the previous decision's, in index order."""
     if method.decision == "nearest_rule":
-        return lambda belief, held, targets: np.array(
+        return lambda belief, held, targets, last: np.array(
             [nearest_unfixed(belief.take(k), targets[k]) for k in range(len(held))])
+    if method.decision == "object_order":
+        return lambda belief, held, targets, last: (last + 1) % targets.shape[1]
     uncertainty = has_uncertainty(method.variant)
 
-    def learned(belief: PoseBelief, held: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    def learned(belief: PoseBelief, held: np.ndarray, targets: np.ndarray, last: np.ndarray) -> np.ndarray:
         vectors = observation_vector(belief, held, "decision", targets, uncertainty, arena)
         return policies.decision.act_batch(vectors, decision_mask(belief.object_mean, targets))
 
     return learned
+
+
+def method_inputs(method: MethodSpec) -> Encode:
+    """What a learned method's skills read: a baseline's pixels and goal, or the pose layout of its variant."""
+    if method.decision == "object_order":
+        return baseline_inputs(method.variant)
+    return pose_inputs(has_uncertainty(method.variant))
+
+
+def sim_of(method: MethodSpec, sim: SimConfig) -> SimConfig:
+    """The world the method plays in: the landmark baseline's shows its drop targets."""
+    return baseline_sim(method.variant, sim) if method.decision == "object_order" else sim
 
 
 def _play_scripted(method: MethodSpec, task: str, sim: SimConfig, keys: list[tuple[Any, int]],
@@ -111,8 +127,8 @@ def _play(method: MethodSpec, sim: SimConfig, todo: list[tuple[str, int, int]], 
         n = min(n_envs, len(keys))
         skills = {"pick": policies.pick, "drop": policies.drop}
         decide = decider(method, policies, Arena.build(sim.arena, sim.arena_size))
-        yield from play_lockstep(task, keys, sim, tracker_factory(n), skills, decide,
-                                 has_uncertainty(method.variant), n, **env_kwargs)
+        yield from play_lockstep(task, keys, sim_of(method, sim), tracker_factory(n), skills, decide,
+                                 method_inputs(method), n, **env_kwargs)
 
 
 def read_records(path: Path) -> list[dict[str, Any]]:

@@ -38,6 +38,10 @@ class TableSpec:
     rows: list[TableRow] = field(default_factory=list)
 
 
+#: a match value that accepts any value of that field (the baselines' encoder is the profile's)
+ANY = object()
+
+
 def _ours(method: str, **setting: Any) -> dict[str, Any]:
     return {"method": method, "arena": "rect", "policy_arena": "rect", "n_objects": 3, **setting}
 
@@ -50,6 +54,10 @@ TABLES: dict[int, TableSpec] = {
     1: TableSpec(1, "Our methods and the baselines (paper Table 1)", [
         TableRow("Policy w/ GT poses (gt_pose)", _ours("gt_pose"), paper.TABLE1["Policy w/ GT poses"], _eval("gt_pose")),
         TableRow("Ours: L-Net + uncertainty (lnet)", _ours("lnet"), paper.TABLE1["Ours"], _eval("lnet")),
+        *(TableRow(f"Baseline: CNN + {label} (paper: ResNet18 + {label})", _ours(name, encoder=ANY),
+                   paper.TABLE1[f"ResNet18 + {label}"], f"mor policy train --variant {name}; {_eval(name)}")
+          for name, label in (("baseline_img", "Img"), ("baseline_delta_pose", "ΔPose"),
+                              ("baseline_landmark", "Landmark"))),
         TableRow("gt_pose sub-policies + nearest-object rule", _ours("gt_pose_nearest_rule"), None,
                  _eval("gt_pose_nearest_rule")),
         TableRow("lnet sub-policies + nearest-object rule", _ours("lnet_nearest_rule"), None, _eval("lnet_nearest_rule")),
@@ -66,12 +74,18 @@ TABLES: dict[int, TableSpec] = {
 
 
 def find_row(rows: list[dict[str, Any]], match: dict[str, Any]) -> dict[str, Any] | None:
-    """The results row whose fields equal ``match`` (and whose encoder is unset unless ``match`` names one)."""
+    """The results row whose fields equal ``match`` (``ANY``: any value; the encoder is unset unless ``match``
+    names one)."""
     wanted = {"encoder": None, **match}
     for row in rows:
-        if all(row.get(key) == value for key, value in wanted.items()):
+        if all(value is ANY or row.get(key) == value for key, value in wanted.items()):
             return row
     return None
+
+
+def row_label(line: TableRow, row: dict[str, Any]) -> str:
+    """The line's label, with the encoder our row was trained with where it has one (the baselines)."""
+    return f"{line.label} [ours: {row['encoder']}]" if row.get("encoder") else line.label
 
 
 def missing_rows(spec: TableSpec, rows: list[dict[str, Any]]) -> list[TableRow]:
@@ -116,7 +130,7 @@ def table_markdown(spec: TableSpec, rows: list[dict[str, Any]]) -> str:
         for k, metric in enumerate(METRIC_NAMES):
             ours, theirs = row["metrics"].get(metric), line.paper[k] if line.paper else None
             cells.append(f"{_cell(ours)}{_beats(ours, theirs, metric)} | {_paper_cell(theirs)}")
-        lines.append(f"| {line.label} | " + " | ".join(cells) + " |")
+        lines.append(f"| {row_label(line, row)} | " + " | ".join(cells) + " |")
     missing = missing_rows(spec, rows)
     if missing:
         lines.append("")
@@ -142,7 +156,7 @@ def write_table_figure(spec: TableSpec, rows: list[dict[str, Any]], path: Path) 
         means = [row["metrics"][m]["mean"] for m in METRIC_NAMES]
         errors = np.array([[row["metrics"][m]["mean"] - row["metrics"][m]["ci95"][0],
                             row["metrics"][m]["ci95"][1] - row["metrics"][m]["mean"]] for m in METRIC_NAMES]).T
-        bars.append((f"ours: {line.label}", means, errors, None))
+        bars.append((f"ours: {row_label(line, row)}", means, errors, None))
         if line.paper:
             bars.append((f"paper: {line.label}", [v[0] if v else np.nan for v in line.paper],
                          np.array([v[1] if v else 0.0 for v in line.paper]), "//"))

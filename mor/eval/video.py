@@ -46,7 +46,7 @@ def write_policy_video(path: Path, sim: SimConfig, tracker: Tracker, pick: Skill
     try:
         env.reset(seed=seed)
         while True:
-            choice = int(decide(env.belief, np.array([env.held]), env.targets[None])[0])
+            choice = int(decide(env.belief, np.array([env.held]), env.targets[None], np.array([env.chain.index]))[0])
             _, _, terminated, truncated, info = env.step(choice)
             if terminated or truncated:
                 break

@@ -76,20 +76,19 @@ class CompactEncoder(nn.Module):
         return self.encode(images)[0]
 
 
-class ResNet18Encoder(nn.Module):
-    """torchvision's ResNet18, randomly initialized (no weights can be downloaded), -> (N, D)."""
+class ResNetEncoder(nn.Module):
+    """torchvision's ResNet18 or ResNet50, randomly initialized (no weights can be downloaded), -> (N, D)."""
 
-    channels = 512
-
-    def __init__(self, feature_dim: int) -> None:
+    def __init__(self, feature_dim: int, depth: int = 18) -> None:
         super().__init__()
-        from torchvision.models import resnet18  # noqa: PLC0415 - only this encoder needs torchvision
+        from torchvision import models  # noqa: PLC0415 - only these encoders need torchvision
 
-        self.backbone = resnet18(weights=None)
-        self.backbone.fc = nn.Sequential(nn.Linear(512, feature_dim), nn.ReLU())
+        self.backbone = getattr(models, f"resnet{depth}")(weights=None)
+        self.channels = self.backbone.fc.in_features  # of the last stage's map: 512 (ResNet18) or 2048 (ResNet50)
+        self.backbone.fc = nn.Sequential(nn.Linear(self.channels, feature_dim), nn.ReLU())
 
     def encode(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(N, 3, H, W) -> features (N, D) and the last stage's map resampled to 4x4, (N, 512, 4, 4)."""
+        """(N, 3, H, W) -> features (N, D) and the last stage's map resampled to 4x4, (N, channels, 4, 4)."""
         net = self.backbone
         stem = net.maxpool(net.relu(net.bn1(net.conv1(images))))
         last = net.layer4(net.layer3(net.layer2(net.layer1(stem))))
@@ -97,6 +96,15 @@ class ResNet18Encoder(nn.Module):
 
     def forward(self, images: torch.Tensor) -> torch.Tensor:
         return self.encode(images)[0]
+
+
+def build_encoder(name: str, feature_dim: int) -> CompactEncoder | ResNetEncoder:
+    """An image encoder by name: ``compact``, ``resnet18`` or ``resnet50``; (N, 3, H, W) in [0, 1] -> (N, D)."""
+    if name == "compact":
+        return CompactEncoder(feature_dim)
+    if name in ("resnet18", "resnet50"):
+        return ResNetEncoder(feature_dim, int(name.removeprefix("resnet")))
+    raise ValueError(f"unknown image encoder {name!r}; choose compact, resnet18 or resnet50")
 
 
 class ObjectAttention(nn.Module):
@@ -129,15 +137,14 @@ class PoseNet(nn.Module):
 
     def __init__(self, config: LNetConfig) -> None:
         super().__init__()
-        encoder = CompactEncoder if config.encoder == "compact" else ResNet18Encoder
-        self.encoder = encoder(config.feature_dim)
+        self.encoder = build_encoder(config.encoder, config.feature_dim)
         self.embed = nn.Embedding(N_CLASSES + 1, config.class_embedding_dim)
         self.agent_head = _mlp(config.feature_dim, config.mlp_hidden, 8)
         object_inputs = config.feature_dim + config.class_embedding_dim
         self.attention = None
         if config.object_head == "attention":
-            self.attention = ObjectAttention(encoder.channels, config.class_embedding_dim)
-            object_inputs += encoder.channels
+            self.attention = ObjectAttention(self.encoder.channels, config.class_embedding_dim)
+            object_inputs += self.encoder.channels
         self.object_head = _mlp(object_inputs, config.mlp_hidden, 6 if config.visibility else 5)
 
     def forward(self, images: torch.Tensor, classes: torch.Tensor) -> PoseEstimate:

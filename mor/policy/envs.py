@@ -8,7 +8,7 @@ import gymnasium as gym
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 
 from mor.policy.hierarchy import HierarchicalRearrange, Skill
-from mor.policy.names import Task, Variant
+from mor.policy.names import BaselineVariant, Task, Variant
 from mor.policy.observations import GroundTruthTracker, PoseObservation, Tracker, has_uncertainty
 from mor.policy.params import PPOParams
 from mor.sim.config import SimConfig
@@ -63,3 +63,18 @@ def make_training_env(
                            * params.n_envs)
     raw = vec_env([lambda: make_task_env(task, sim, render_frames=True)] * params.n_envs)
     return LNetVecObservation(raw, runner, task, sim.n_objects, uncertainty)
+
+
+def baseline_sim(variant: BaselineVariant, sim: SimConfig) -> SimConfig:
+    """The world a baseline plays in: ``baseline_landmark`` shows a marker at each drop target."""
+    return sim.model_copy(update={"landmark": True}) if variant == "baseline_landmark" else sim
+
+
+def make_baseline_training_env(task: Task, variant: BaselineVariant, sim: SimConfig, params: PPOParams) -> VecEnv:
+    """``params.n_envs`` rendered Pick or Drop envs seen through ``BaselineObservation``, for SB3."""
+    from mor.policy.baselines import BASELINE_INPUTS, BaselineObservation  # noqa: PLC0415 - torch only here
+
+    world = baseline_sim(variant, sim)
+    vec_env = SubprocVecEnv if params.vec_env == "subproc" else DummyVecEnv
+    return vec_env([lambda: BaselineObservation(make_task_env(task, world, render_frames=True),
+                                                BASELINE_INPUTS[variant])] * params.n_envs)

@@ -9,3 +9,7 @@ TASKS: tuple[Task, ...] = ("pick", "drop", "decision")
 
 Variant = Literal["gt_pose", "lnet", "lnet_no_uncertainty"]
 VARIANTS: tuple[Variant, ...] = ("gt_pose", "lnet", "lnet_no_uncertainty")
+
+#: the paper's end-to-end CNN baselines (mor.policy.baselines): +Img, +ΔPose, +Landmark
+BaselineVariant = Literal["baseline_img", "baseline_delta_pose", "baseline_landmark"]
+BASELINE_VARIANTS: tuple[BaselineVariant, ...] = ("baseline_img", "baseline_delta_pose", "baseline_landmark")

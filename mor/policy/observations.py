@@ -65,6 +65,13 @@ class GroundTruthBatchTracker:
                                      np.stack([i["object_positions"] for i in infos]))
 
 
+class RenderingTruthTracker(GroundTruthBatchTracker):
+    """For the pixel-fed baselines: the frames are rendered; the truth it returns is not what they read
+    (``mor.policy.baselines.baseline_inputs`` ignores the belief)."""
+
+    needs_frames = True
+
+
 class Tracker(Protocol):
     """Keeps one environment's belief: ``start`` at an episode's first observation, ``update`` after each step."""
 

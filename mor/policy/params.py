@@ -35,6 +35,17 @@ class PPOParams(_Strict):
     checkpoint_every: int = Field(50_000, ge=1, description="steps between resumable checkpoints")
 
 
+class BaselineParams(_Strict):
+    """The end-to-end CNN baselines (``mor.policy.baselines``): encoder and their Pick and Drop PPO runs."""
+
+    encoder: Literal["nature_cnn", "compact", "resnet18", "resnet50"] = Field(
+        "nature_cnn", description="nature_cnn: SB3's NatureCNN (2 CPU cores; frames >= 36 px); compact: the L-Net's "
+                                  "encoder (any frame size); resnet18/50: the paper's")
+    image_features: int = Field(256, ge=8, description="the encoder's output width")
+    pick: PPOParams = Field(default_factory=PPOParams)
+    drop: PPOParams = Field(default_factory=PPOParams)
+
+
 class PolicyParams(_Strict):
     """Phase I (pick, drop) and phase II (decision) training for each observation variant."""
 
@@ -48,6 +59,7 @@ class PolicyParams(_Strict):
                                                           "draw from their distribution with a per-episode generator")
     lnet_warm_start: bool = Field(True, description="L-Net variants start from the gt_pose policies (same layout; "
                                                     "uncertainty inputs zero-weighted) and train lnet_steps more")
+    baseline: BaselineParams = Field(default_factory=BaselineParams)
     lnet_steps: dict[Task, int] = Field(default_factory=lambda: {"pick": 100_000, "drop": 100_000, "decision": 0},
                                         description="fine-tuning steps of the L-Net variants when warm-started")
 

@@ -10,7 +10,7 @@ from pydantic import BaseModel, ConfigDict
 from mor.atomic import atomic_output
 from mor.errors import ConfigError
 from mor.policy.features import feature_names
-from mor.policy.names import Task, Variant
+from mor.policy.names import BaselineVariant, Task, Variant
 from mor.policy.observations import has_uncertainty
 
 
@@ -20,7 +20,7 @@ class PolicySignature(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     task: Task
-    variant: Variant
+    variant: Variant | BaselineVariant
     n_objects: int
     arena: str
     observation: list[str]
@@ -31,6 +31,16 @@ class PolicySignature(BaseModel):
         names = feature_names(task, n_objects, has_uncertainty(variant))
         return cls(task=task, variant=variant, n_objects=n_objects, arena=arena, observation=names,
                    lnet_version=lnet_version if variant != "gt_pose" else None)
+
+    @classmethod
+    def of_baseline(cls, task: Task, variant: BaselineVariant, n_objects: int, arena: str, image_size: int
+                    ) -> PolicySignature:
+        """A baseline skill's: its observation is ``mor.policy.baselines.baseline_space``, named key(shape)."""
+        from mor.policy.baselines import BASELINE_INPUTS, baseline_space  # noqa: PLC0415 - torch-free callers
+
+        space = baseline_space(task, BASELINE_INPUTS[variant], (image_size, image_size, 3), 1.0)
+        names = [f"{key}{list(value.shape or (int(value.n),))}" for key, value in space.spaces.items()]
+        return cls(task=task, variant=variant, n_objects=n_objects, arena=arena, observation=names)
 
 
 def write_signature(path: Path, signature: PolicySignature) -> None:

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from gymnasium import spaces
 from sb3_contrib import MaskablePPO
 from sb3_contrib.common.maskable.policies import MaskableActorCriticPolicy
 from stable_baselines3.common.callbacks import BaseCallback
@@ -135,10 +136,12 @@ def warm_start(model: MaskablePPO, source: Path, source_names: list[str], names:
 def train_policy(
     make_env: Callable[[], VecEnv], params: PPOParams, signature: PolicySignature, out_dir: Path, seed: int,
     label: str, progress: bool = True, init_from: tuple[Path, list[str]] | None = None,
+    policy_kwargs: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Train (or resume) one MaskablePPO policy for ``params.steps`` steps on ``make_env()``'s environments
     (``mor.policy.envs.make_training_env``). init_from: (a policy's policy.pth, its feature names) to start from
-    (``warm_start``) instead of a random initialization."""
+    (``warm_start``) instead of a random initialization. Dict observations (the baselines) get SB3's
+    ``MultiInputPolicy`` with ``policy_kwargs`` (e.g. the image encoder), flat vectors the ``MlpPolicy``."""
     torch.set_num_threads(1)  # 2.4-10x faster than torch's default on 2 cores (docs/design.md, "Decisions")
     out_dir.mkdir(parents=True, exist_ok=True)
     env = make_env()
@@ -146,9 +149,10 @@ def train_policy(
     if checkpoint.exists():
         model = MaskablePPO.load(checkpoint, env=env, device="cpu")
     else:
+        dict_input = isinstance(env.observation_space, spaces.Dict)
         model = MaskablePPO(
-            "MlpPolicy", env, seed=seed, device="cpu", verbose=0,
-            policy_kwargs={"net_arch": list(params.hidden)},
+            "MultiInputPolicy" if dict_input else "MlpPolicy", env, seed=seed, device="cpu", verbose=0,
+            policy_kwargs={"net_arch": list(params.hidden), **(policy_kwargs or {})},
             n_steps=params.n_steps, batch_size=params.batch_size, n_epochs=params.n_epochs,
             learning_rate=params.learning_rate, gamma=params.gamma, gae_lambda=params.gae_lambda,
             clip_range=params.clip_range, ent_coef=params.ent_coef, vf_coef=params.vf_coef,

@@ -7,7 +7,7 @@ import pytest
 import torch
 from sb3_contrib import MaskablePPO
 
-from mor.eval.lockstep import play_lockstep
+from mor.eval.lockstep import play_lockstep, pose_inputs
 from mor.eval.methods import METHODS, TrainedPolicies
 from mor.eval.protocol import decider
 from mor.lnet.calibration import Calibration
@@ -71,7 +71,8 @@ def _one_at_a_time(task: str, seed: int, tracker, policies: TrainedPolicies, met
     else:
         env = make_policy_env("decision", SIM, tracker, True, (policies.pick, policies.drop), horizon=HORIZON)
         decide = decider(METHODS[method], policies, ARENA)
-        act = lambda vector: int(decide(env.belief, np.array([env.held]), env.targets[None])[0])  # noqa: E731
+        act = lambda vector: int(decide(env.belief, np.array([env.held]), env.targets[None],
+                                            np.array([env.chain.index]))[0])  # noqa: E731
     vector, _ = env.reset(seed=seed)
     total, steps = 0.0, 0
     while True:
@@ -94,7 +95,8 @@ def test_lockstep_equals_one_episode_at_a_time(task: str, method: str, determini
     keys = [((task, 0, e), 100 + e) for e in range(3)]
     skills = {"pick": policies.pick, "drop": policies.drop}
     played = dict(play_lockstep(task, keys, SIM, GroundTruthBatchTracker(), skills,
-                                decider(METHODS[method], policies, ARENA), True, n_envs=2, horizon=HORIZON))
+                                decider(METHODS[method], policies, ARENA), pose_inputs(True), n_envs=2,
+                                horizon=HORIZON))
     for key, seed in keys:
         alone = _one_at_a_time(task, seed, GroundTruthTracker(), policies, method)
         assert played[key]["metrics"] == alone["metrics"] and played[key]["steps"] == alone["steps"], key
@@ -106,7 +108,7 @@ def test_lockstep_with_the_lnet_equals_one_tracker_per_episode(quick: TrainedPol
     keys = [(("rearrange", 0, e), 200 + e) for e in range(3)]
     played = dict(play_lockstep("rearrange", keys, SIM, LNetBatchTracker(runner, 2),
                                 {"pick": quick.pick, "drop": quick.drop}, decider(METHODS["lnet_nearest_rule"], quick, ARENA),
-                                True, n_envs=2, horizon=HORIZON))
+                                pose_inputs(True), n_envs=2, horizon=HORIZON))
     for key, seed in keys:
         alone = _one_at_a_time("rearrange", seed, LNetTracker(runner), quick, "lnet_nearest_rule")
         assert played[key] == {**alone, "return": played[key]["return"]}, key

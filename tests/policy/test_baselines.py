@@ -1,0 +1,93 @@
+"""The end-to-end CNN baselines: what each input variant sees, the encoder, and the object-order decision."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from stable_baselines3.common.preprocessing import preprocess_obs
+
+from mor.eval.methods import METHODS
+from mor.eval.protocol import decider, sim_of
+from mor.policy.baselines import (BASELINE_INPUTS, BaselineExtractor, BaselineObservation, baseline_inputs,
+                                  baseline_tasks)
+from mor.policy.envs import make_task_env
+from mor.policy.names import BASELINE_VARIANTS
+from mor.policy.signature import PolicySignature
+from mor.sim.config import SimConfig
+from mor.sim.geometry import bearing
+
+SIM = SimConfig(n_objects=3, image_size=32)
+
+
+def test_pick_sees_the_frame_and_the_target_class_only() -> None:
+    env = BaselineObservation(make_task_env("pick", SIM, render_frames=True), "delta_pose")
+    observation, _ = env.reset(seed=3)
+    raw = env.unwrapped
+    assert set(observation) == {"image", "goal_class"}
+    assert observation["image"].shape == (3, 32, 32) and observation["image"].dtype == np.uint8
+    assert observation["goal_class"] == raw.layout.object_classes[raw.goal_object]
+    assert env.observation_space.contains(observation)
+    env.close()
+
+
+def test_delta_pose_is_the_targets_distance_and_bearing_from_the_true_pose() -> None:
+    env = BaselineObservation(make_task_env("drop", SIM, render_frames=True), "delta_pose")
+    observation, info = env.reset(seed=5)
+    for action in (0, 1, 0):
+        observation, *_, info = env.step(action)
+    target, pose = np.asarray(observation["goal_position"]), info["agent_pose"]
+    distance, cos, sin = observation["delta_pose"]
+    assert distance == pytest.approx(np.linalg.norm(target - pose[:2]), abs=1e-5)
+    assert np.arctan2(sin, cos) == pytest.approx(bearing(pose, target), abs=1e-5)
+    assert observation["goal_class"] == env.unwrapped.layout.object_classes[info["held"]]
+    assert env.observation_space.contains(observation)
+    env.close()
+
+
+def test_img_drop_has_no_relative_pose_and_landmark_shows_the_targets() -> None:
+    env = BaselineObservation(make_task_env("drop", SIM, render_frames=True), "img")
+    assert set(env.observation_space.spaces) == {"image", "goal_class", "goal_position"}
+    env.close()
+    assert sim_of(METHODS["baseline_landmark"], SIM).landmark and not sim_of(METHODS["baseline_img"], SIM).landmark
+
+
+def test_baselines_refuse_unrendered_envs() -> None:
+    with pytest.raises(TypeError, match="rendered"):
+        BaselineObservation(make_task_env("pick", SIM, render_frames=False), "img")
+
+
+@pytest.mark.parametrize("encoder", ["compact", "nature_cnn"])
+def test_the_extractor_concatenates_image_features_and_the_one_hot_goal(encoder: str) -> None:
+    sim = SimConfig(n_objects=3, image_size=48)  # NatureCNN needs frames of at least 36 pixels
+    env = BaselineObservation(make_task_env("drop", sim, render_frames=True), "delta_pose")
+    observation, _ = env.reset(seed=0)
+    extractor = BaselineExtractor(env.observation_space, encoder, image_features=32)
+    batch = {key: torch.as_tensor(np.asarray(value)[None]) for key, value in observation.items()}
+    features = extractor(preprocess_obs(batch, env.observation_space))
+    assert features.shape == (1, 32 + 24 + 2 + 3) == (1, extractor.features_dim)
+    env.close()
+
+
+def test_only_baseline_img_trains_a_pick_and_the_signature_names_the_inputs() -> None:
+    assert [baseline_tasks(v) for v in BASELINE_VARIANTS] == [("pick", "drop"), ("drop",), ("drop",)]
+    signature = PolicySignature.of_baseline("drop", "baseline_delta_pose", 3, "square", 64)
+    assert signature.observation == ["delta_pose[3]", "goal_class[24]", "goal_position[2]", "image[3, 64, 64]"]
+
+
+def test_the_evaluation_encoding_equals_the_training_wrapper() -> None:
+    for variant in BASELINE_VARIANTS:
+        env = BaselineObservation(make_task_env("drop", SIM, render_frames=True), BASELINE_INPUTS[variant])
+        wrapped, _ = env.reset(seed=1)
+        raw = env.unwrapped._observation()
+        info = env._info
+        batch = baseline_inputs(variant)("drop", [raw], [info], None, np.asarray([raw["goal_position"]]), None)
+        for key, value in wrapped.items():
+            np.testing.assert_array_equal(batch[key][0], value)
+        env.close()
+
+
+def test_the_object_order_rule_takes_the_object_after_the_last() -> None:
+    decide = decider(METHODS["baseline_img"], None, None)
+    targets = np.zeros((3, 3, 2))
+    assert decide(None, np.array([3, 3, 3]), targets, np.array([-1, 0, 2])).tolist() == [0, 1, 0]
