@@ -57,8 +57,21 @@ class BuildParams(_Strict):
     shard_episodes: int = Field(100, ge=1, description="episodes per build shard (the unit of resumption)")
 
 
+class SettingParams(_Strict):
+    """How a setting's workspace (``mor --setting NAME``: paper Tables 3 and 4) reuses the main workspace's work.
+
+    Paths of the main workspace are ``pipelines.paths.MAIN`` (two folders up from ``settings/NAME/``).
+    """
+
+    lnet_from_main: bool = Field(False, description="observe through the main workspace's L-Net (no data or L-Net "
+                                                    "of the setting's own)")
+    finetune_from_main: bool = Field(False, description="every variant's policies start from the main workspace's "
+                                                        "policy of the same variant and task and train the "
+                                                        "profile's policy.lnet_steps more")
+
+
 class Profile(_Strict):
-    """One scale profile: every stage's parameters."""
+    """One scale profile: every stage's parameters (``setting``: only in a setting's workspace)."""
 
     sim: SimConfig = Field(default_factory=SimConfig)
     oracle: OracleParams = Field(default_factory=OracleParams)
@@ -68,6 +81,7 @@ class Profile(_Strict):
     lnet: LNetParams = Field(default_factory=LNetParams)
     policy: PolicyParams = Field(default_factory=PolicyParams)
     evaluate: EvalParams = Field(default_factory=EvalParams)
+    setting: SettingParams | None = None
 
 
 Model = TypeVar("Model", bound=BaseModel)
@@ -124,3 +138,27 @@ def load_profile(name: str | None = None, path: Path = DEFAULT_PARAMS) -> Profil
         return Profile.model_validate(document["profiles"][name] or {})
     except ValidationError as error:
         raise ConfigError(format_validation_error(error, f"{path}: profiles.{name}")) from None
+
+
+def deep_merge(base: dict[str, Any], overlay: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with ``overlay``'s values, mappings merged key by key (neither argument is changed)."""
+    merged = dict(base)
+    for key, value in overlay.items():
+        merged[key] = deep_merge(merged[key], value) if isinstance(value, dict) and isinstance(
+            merged.get(key), dict) else value
+    return merged
+
+
+def setting_document(path: Path, setting: str) -> dict[str, Any]:
+    """The parameters file at ``path`` with ``settings.<setting>`` merged into every profile (and no ``settings``):
+    the params.yaml of that setting's workspace. ConfigError naming the file when there is no such setting."""
+    document = _read_params(path)
+    settings = document.get("settings") or {}
+    if setting not in settings:
+        known = ", ".join(settings) or "none"
+        raise ConfigError(f"{path}: settings.{setting}: no such setting; choose one of {known}")
+    overlay = settings[setting] or {}
+    if not isinstance(overlay, dict):
+        raise ConfigError(f"{path}: settings.{setting}: expected a mapping of profile overrides")
+    profiles = {name: deep_merge(values or {}, overlay) for name, values in document["profiles"].items()}
+    return {**{k: v for k, v in document.items() if k != "settings"}, "profiles": profiles}

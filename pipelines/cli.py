@@ -66,6 +66,18 @@ bench_app = new_group("Benchmarks that write JSON.")
 app.add_typer(sim_app, name="sim")
 app.add_typer(bench_app, name="bench")
 
+
+@app.callback()
+def root(ctx: typer.Context, setting: Annotated[str | None, typer.Option(
+        "--setting", help="Run the command in the workspace of a setting of params.yaml (settings/<name>/: the "
+                          "polygon arena, 1-5 objects).")] = None) -> None:
+    """MOR: Mobile Object Rearrangement toolkit."""
+    if setting is not None:
+        from pipelines import settings  # noqa: PLC0415
+
+        previous = settings.enter(setting)
+        ctx.call_on_close(lambda: os.chdir(previous))
+
 ProfileOption = Annotated[str | None, typer.Option(
     "--profile", "-p", help="params.yaml profile: tiny, default or paper (default: `profile:` in params.yaml).")]
 ParamsOption = Annotated[Path, typer.Option("--params", help="The parameters file.")]

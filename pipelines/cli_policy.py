@@ -44,7 +44,9 @@ def policy_train(
 @eval_app.command("run")
 def eval_run(
     method: Annotated[str, typer.Option("--method", "-m", help="gt_pose, lnet, lnet_no_uncertainty, "
-                                                                "*_nearest_rule, oracle or random.")],
+                                                                "*_nearest_rule, baseline_*, oracle or random.")],
+    zero_shot: Annotated[bool, typer.Option("--zero-shot", help="In a setting (mor --setting NAME ...): play the "
+                                                                "main workspace's policies (paper Table 3).")] = False,
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
@@ -52,7 +54,7 @@ def eval_run(
     from pipelines import evaluate  # noqa: PLC0415
 
     name = active_profile(profile, params)
-    row = evaluate.run(load_profile(name, params), name, method)
+    row = evaluate.run(load_profile(name, params), name, method, zero_shot=zero_shot)
     summary = ", ".join(f"{k} {v['mean']:.3f} ± {v['std']:.3f}" for k, v in row["metrics"].items())
     typer.echo(f"{method}: {summary}")
 
@@ -80,7 +82,7 @@ def bench_policy_command(
     from pipelines.train_policy import lnet_runner  # noqa: PLC0415
 
     config = load_profile(profile, params)
-    result = bench_policy(config.sim, config.policy.pick, lnet_runner("lnet"), seconds, repeats)
+    result = bench_policy(config.sim, config.policy.pick, lnet_runner("lnet", config), seconds, repeats)
     typer.echo(", ".join(f"{k} {v:.0f} steps/s" for k, v in result["steps_per_second"].items()))
     typer.echo(f"wrote {write_json(out, result)}")
 

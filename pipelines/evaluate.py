@@ -22,21 +22,35 @@ from mor.policy.observations import (BatchTracker, GroundTruthBatchTracker, Rend
 from mor.sim.arena import Arena
 from pipelines import paths
 from pipelines.io import write_json
+from mor.policy.signature import read_signature
 from pipelines.train_policy import lnet_runner
 
 
-def load_method(profile: Profile, method: MethodSpec) -> tuple[TrainedPolicies, Callable[[int], BatchTracker]]:
-    """A learned method's committed policies (checked against what they were trained on) and its tracker factory."""
-    sim = profile.sim
+def policy_root(profile: Profile, zero_shot: bool) -> Path:
+    """Where the policies a method plays are committed: this workspace's, or (zero-shot, only in a setting) the
+    main workspace's."""
+    if not zero_shot:
+        return paths.POLICY_CARD
+    if profile.setting is None:
+        raise ConfigError("--zero-shot: plays the main workspace's policies in a setting; run it as "
+                          "mor --setting NAME eval run --method M --zero-shot")
+    return paths.MAIN / paths.POLICY_CARD
+
+
+def load_method(profile: Profile, method: MethodSpec, zero_shot: bool = False
+                ) -> tuple[TrainedPolicies, Callable[[int], BatchTracker]]:
+    """A learned method's committed policies (checked against what they were trained on) and its tracker factory;
+    zero_shot: the main workspace's policies through this workspace's L-Net (``policy_root``)."""
+    sim, root = profile.sim, policy_root(profile, zero_shot)
     if method.decision == "object_order":
-        policies = TrainedPolicies.load_baseline(paths.POLICY_CARD, method.variant, sim.n_objects, sim.arena,
+        policies = TrainedPolicies.load_baseline(root, method.variant, sim.n_objects, sim.arena,
                                                  sim.image_size, profile.policy.skills_deterministic)
         return policies, lambda n: RenderingTruthTracker()
-    runner = lnet_runner(method.variant)
+    runner = lnet_runner(method.variant, profile)
     version = runner.dataset_version if runner is not None else None
-    policies = TrainedPolicies.load(paths.POLICY_CARD, method.variant, sim.n_objects, sim.arena, version,
+    policies = TrainedPolicies.load(root, method.variant, sim.n_objects, sim.arena, version,
                                     with_decision=method.decision == "learned",
-                                    deterministic=profile.policy.skills_deterministic)
+                                    deterministic=profile.policy.skills_deterministic, zero_shot=zero_shot)
     if runner is None:
         return policies, lambda n: GroundTruthBatchTracker()
     from mor.policy.lnet_tracking import LNetBatchTracker  # noqa: PLC0415
@@ -44,33 +58,38 @@ def load_method(profile: Profile, method: MethodSpec) -> tuple[TrainedPolicies, 
     return policies, lambda n: LNetBatchTracker(runner, n)
 
 
-def policy_folders(method: MethodSpec) -> dict[str, Path]:
+def policy_folders(method: MethodSpec, root: Path) -> dict[str, Path]:
     """The committed folder of each policy a learned method plays (a baseline's pick is ``PICK_FROM``'s)."""
     if method.decision == "object_order":
         from mor.policy.baselines import PICK_FROM  # noqa: PLC0415 - torch only here
 
-        return {"pick": paths.POLICY_CARD / PICK_FROM / "pick", "drop": paths.POLICY_CARD / method.variant / "drop"}
+        return {"pick": root / PICK_FROM / "pick", "drop": root / method.variant / "drop"}
     tasks = [task for task in TASKS if task != "decision" or method.decision == "learned"]
-    return {task: paths.POLICY_CARD / method.variant / task for task in tasks}
+    return {task: root / method.variant / task for task in tasks}
 
 
-def run(profile: Profile, profile_name: str, method_name: str, progress: bool = True) -> dict[str, Any]:
-    """Evaluate ``method_name`` with the profile's protocol; write its row to ``cards/results/rows/``."""
+def run(profile: Profile, profile_name: str, method_name: str, progress: bool = True, zero_shot: bool = False
+        ) -> dict[str, Any]:
+    """Evaluate ``method_name`` with the profile's protocol; write its row to ``cards/results/rows/``.
+    zero_shot: play the main workspace's policies in this setting (rows and records named ``<method>_zero_shot``)."""
     method = method_spec(method_name)
     sim, protocol = profile.sim, profile.evaluate
-    policies, tracker_factory, train_steps = None, None, None
+    policies, tracker_factory, train_steps, policy_arena = None, None, None, sim.arena
     baseline = method.decision == "object_order"
     if method.variant is not None:
-        policies, tracker_factory = load_method(profile, method)
+        policies, tracker_factory = load_method(profile, method, zero_shot)
+        folders = policy_folders(method, policy_root(profile, zero_shot))
         train_steps = {task: json.loads((folder / "summary.json").read_text())["steps"]
-                       for task, folder in policy_folders(method).items()}
-    records = run_protocol(method, sim, protocol.seeds, protocol.episodes, paths.EVAL / f"{method.name}.jsonl",
+                       for task, folder in folders.items()}
+        policy_arena = read_signature(folders["pick"] / "meta.json").arena
+    name = f"{method.name}_zero_shot" if zero_shot else method.name
+    records = run_protocol(method, sim, protocol.seeds, protocol.episodes, paths.EVAL / f"{name}.jsonl",
                            policies, tracker_factory, protocol.n_envs, progress, protocol.horizon)
-    row = {"method": method.name, "encoder": profile.policy.baseline.encoder if baseline else None, "arena": arena_label(sim.arena),
-           "policy_arena": arena_label(sim.arena), "n_objects": sim.n_objects, "seeds": protocol.seeds,
-           "episodes_per_seed": protocol.episodes, "train_steps": train_steps,
+    row = {"method": method.name, "encoder": profile.policy.baseline.encoder if baseline else None,
+           "arena": arena_label(sim.arena), "policy_arena": arena_label(policy_arena), "n_objects": sim.n_objects,
+           "seeds": protocol.seeds, "episodes_per_seed": protocol.episodes, "train_steps": train_steps,
            "metrics": metric_summaries(records, protocol.bootstrap_resamples), "profile": profile_name}
-    write_json(paths.RESULTS_CARD / "rows" / f"{method.name}.json", row)
+    write_json(paths.RESULTS_CARD / "rows" / f"{name}.json", row)
     return row
 
 
@@ -87,9 +106,11 @@ def policy_video(profile: Profile, method_name: str, seed: int, out: Path) -> di
 
 
 def collect_results(profile_name: str) -> Path:
-    """Merge every row in ``cards/results/rows/`` of this profile into ``cards/results/results.json`` and render
-    the tables into ``cards/results/README.md``."""
-    rows = [json.loads(p.read_text()) for p in sorted((paths.RESULTS_CARD / "rows").glob("*.json"))]
+    """Merge every row in ``cards/results/rows/`` (and each setting's, ``settings/*/cards/results/rows/``) of this
+    profile into ``cards/results/results.json`` and render the tables into ``cards/results/README.md``."""
+    row_files = [*(paths.RESULTS_CARD / "rows").glob("*.json"),
+                 *paths.SETTINGS.glob(f"*/{paths.RESULTS_CARD}/rows/*.json")]  # the settings' rows: Tables 3 and 4
+    rows = [json.loads(p.read_text()) for p in sorted(row_files)]
     path = paths.RESULTS_CARD / "results.json"
     existing = json.loads(path.read_text()) if path.is_file() else {"profile": profile_name, "rows": []}
     if existing.get("profile") != profile_name:

@@ -23,3 +23,5 @@ POLICIES = DATASETS / "policy"           # policy training runs: <variant>/<task
 POLICY_CARD = Path("cards/policy")        # committed policies: <variant>/<task>/policy.pth + meta.json, card, curves
 EVAL = DATASETS / "eval"                  # per-episode records: <method>.jsonl
 RESULTS_CARD = Path("cards/results")      # rows/<method>.json, results.json, README.md (the tables)
+SETTINGS = Path("settings")                # setting workspaces: settings/<name>/ (pipelines/settings.py)
+MAIN = Path("../..")                      # the main workspace, seen from a setting's workspace

@@ -15,20 +15,39 @@ from mor.config import Profile
 from mor.policy.envs import make_baseline_training_env, make_training_env
 from mor.policy.hierarchy import POLICY_FILE, Skill
 from mor.policy.names import BASELINE_VARIANTS, TASKS, BaselineVariant, Task, Variant
-from mor.policy.signature import PolicySignature
+from mor.policy.signature import PolicySignature, read_signature
 from mor.policy.train import train_policy
 from pipelines import paths
 
 PUBLISHED = (POLICY_FILE, "meta.json", "summary.json", "log.csv", "learning_curve.png")  # the last two if trained
 
 
-def lnet_runner(variant: Variant) -> Any:
-    """The committed L-Net (``cards/lnet/model.pt`` + calibration) for the L-Net variants; None for gt_pose."""
+def lnet_runner(variant: Variant, profile: Profile) -> Any:
+    """The committed L-Net (``cards/lnet/model.pt`` + calibration; the main workspace's where the setting says
+    ``lnet_from_main``) for the L-Net variants; None for gt_pose."""
     if variant == "gt_pose":
         return None
     from mor.lnet.runtime import load_lnet  # noqa: PLC0415 - torch model only where needed
 
-    return load_lnet(paths.LNET_CARD / "model.pt")
+    from_main = profile.setting is not None and profile.setting.lnet_from_main
+    return load_lnet((paths.MAIN / paths.LNET_CARD if from_main else paths.LNET_CARD) / "model.pt")
+
+
+def starting_policy(profile: Profile, variant: Variant, task: Task) -> Path | None:
+    """The committed policy folder a new ``variant`` ``task`` policy starts from, None for a random start.
+
+    In a setting with ``finetune_from_main``: the main workspace's policy of the same variant and task (the
+    decision only where its action space, one action per object, is the same). Otherwise the L-Net variants start
+    from this workspace's gt_pose policy when ``lnet_warm_start`` (docs/assumptions.md, "Policies").
+    """
+    setting, policy = profile.setting, profile.policy
+    if setting is not None and setting.finetune_from_main:
+        main = paths.MAIN / paths.POLICY_CARD / variant / task
+        if task != "decision" or read_signature(main / "meta.json").n_objects == profile.sim.n_objects:
+            return main
+    if variant != "gt_pose" and policy.lnet_warm_start:
+        return paths.POLICY_CARD / "gt_pose" / task
+    return None
 
 
 def publish(run_dir: Path, card_dir: Path) -> None:
@@ -65,17 +84,16 @@ def run(profile: Profile, variant: Variant | BaselineVariant, tasks: tuple[Task,
     """Train ``tasks`` of ``variant`` in order (the decision needs the pick and drop skills); resumable."""
     if variant in BASELINE_VARIANTS:
         return run_baseline(profile, variant, tasks, progress)
-    runner = lnet_runner(variant)
+    runner = lnet_runner(variant, profile)
     version = runner.dataset_version if runner is not None else None
     summaries = []
     policy = profile.policy
     for task in tasks:
         params, init_from = getattr(policy, task), None
-        if variant != "gt_pose" and policy.lnet_warm_start:
+        source = starting_policy(profile, variant, task)
+        if source is not None:
             params = params.model_copy(update={"steps": policy.lnet_steps[task]})
-            source = paths.POLICY_CARD / "gt_pose" / task
-            init_from = (source / POLICY_FILE, PolicySignature.model_validate_json(
-                (source / "meta.json").read_text()).observation)
+            init_from = (source / POLICY_FILE, read_signature(source / "meta.json").observation)
         skills = None
         if task == "decision":
             skills = tuple(Skill.load(paths.POLICY_CARD / variant / name / POLICY_FILE,

@@ -50,9 +50,15 @@ def _stages() -> dict[str, dict[str, Any]]:
     return {name: body.get("do", body) for name, body in stages.items()}
 
 
+def _words(cmd: str) -> list[str]:
+    """A ``mor`` command's words without the root option ``--setting NAME`` (which runs pipelines.settings)."""
+    words = cmd.split()
+    return words[:1] + words[3:] if words[1:2] == ["--setting"] else words
+
+
 def _command_of(cmd: str) -> Callable[..., Any] | None:
     """The CLI function that a stage's ``cmd`` runs, or None when it is not a ``mor`` command."""
-    words = cmd.split()
+    words = _words(cmd)
     if not words or words[0] != "mor":
         return None
     for length in range(len(words) - 1, 0, -1):
@@ -75,7 +81,9 @@ def stage_modules(name: str, stage: dict[str, Any]) -> set[str]:
     function = _command_of(stage["cmd"])
     assert function is not None, f"stage {name}: cmd is not a mor command; declare its modules in EXPLICIT_STAGE_MODULES"
     body = ast.parse(textwrap.dedent(inspect.getsource(function)))
-    return (imports_of_tree(body, function.__module__) | _module_level_imports(function.__module__)) - CLI_MODULES
+    setting = {"pipelines.settings"} if "--setting" in stage["cmd"].split()[1:2] else set()
+    return (imports_of_tree(body, function.__module__) | _module_level_imports(function.__module__) | setting
+            ) - CLI_MODULES
 
 
 def required_files(name: str, stage: dict[str, Any]) -> set[str]:

@@ -94,6 +94,30 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
         assert (workspace / f"cards/policy/{variant}/episode.mp4").stat().st_size > 0
         assert "## Evaluation" in (workspace / f"cards/policy/{variant}/README.md").read_text()
 
+    # The settings of Tables 3 and 4: the polygon arena with its own data and L-Net; 2 objects on the main L-Net.
+    polygon = ("--setting", "polygon")
+    for stage in ("collect", "build-dataset", "train-lnet", "calibrate-lnet", "eval-lnet"):
+        _run(*polygon, stage, "--profile", "tiny")
+    assert json.loads((workspace / "settings/polygon/cards/lnet/metrics.json").read_text())["dataset_version"] != (
+        metrics["dataset_version"])  # the polygon's own data and L-Net
+    _run(*polygon, "eval", "run", "--method", "lnet", "--zero-shot", "--profile", "tiny")
+    _run(*polygon, "policy", "train", "--variant", "lnet", "--profile", "tiny")
+    fine_tuned = json.loads((workspace / "settings/polygon/cards/policy/lnet/pick/summary.json").read_text())
+    assert fine_tuned["warm_start_from"] == "../../cards/policy/lnet/pick/policy.pth"
+    _run(*polygon, "eval", "run", "--method", "lnet", "--profile", "tiny")
+    objects = ("--setting", "objects_2")
+    for variant in ("gt_pose", "lnet"):
+        _run(*objects, "policy", "train", "--variant", variant, "--profile", "tiny")
+    _run(*objects, "eval", "run", "--method", "lnet", "--profile", "tiny")
+    _run("eval", "results", "--profile", "tiny")
+    rows = json.loads((workspace / "cards/results/results.json").read_text())["rows"]
+    settings = {(r["arena"], r["policy_arena"], r["n_objects"]) for r in rows if r["method"] == "lnet"}
+    assert settings == {("rect", "rect", 3), ("polygon", "rect", 3), ("polygon", "polygon", 3), ("rect", "rect", 2)}
+    readme = (workspace / "cards/results/README.md").read_text()
+    assert "| Ours (lnet), policies trained in rect: zero-shot |" in readme and "| 2 objects: Ours (lnet) |" in readme
+    missing = CliRunner().invoke(app, ["eval", "tables", "--table", "3"])
+    assert missing.exit_code == 2 and "mor --setting polygon eval run --method baseline_delta_pose" in missing.output
+
 
 def test_validate_without_a_manifest_is_one_clear_line(workspace: Path) -> None:
     result = CliRunner().invoke(app, ["validate"])

@@ -15,7 +15,7 @@ from typing import Literal
 from mor.errors import ConfigError
 from mor.policy.hierarchy import POLICY_FILE, Skill
 from mor.policy.names import BASELINE_VARIANTS, TASKS, BaselineVariant, Task, Variant
-from mor.policy.signature import PolicySignature, check_signature
+from mor.policy.signature import ZERO_SHOT_FIELDS, PolicySignature, check_signature
 
 Decision = Literal["learned", "nearest_rule", "object_order", "scripted"]
 
@@ -61,12 +61,15 @@ class TrainedPolicies:
 
     @classmethod
     def load(cls, root: Path, variant: Variant, n_objects: int, arena: str, lnet_version: str | None,
-             with_decision: bool, deterministic: bool = True) -> TrainedPolicies:
-        """Load ``root/variant/{pick,drop,decision}/policy.pth``, each checked against its ``meta.json``."""
+             with_decision: bool, deterministic: bool = True, zero_shot: bool = False) -> TrainedPolicies:
+        """Load ``root/variant/{pick,drop,decision}/policy.pth``, each checked against its ``meta.json``
+        (zero_shot: trained in another arena and through another L-Net, ``ZERO_SHOT_FIELDS``)."""
         skills: dict[str, Skill | None] = {"decision": None}
+        allow = ZERO_SHOT_FIELDS if zero_shot else ()
         for task in TASKS if with_decision else ("pick", "drop"):
             folder = policy_dir(root, variant, task)
-            check_signature(folder / "meta.json", PolicySignature.of(task, variant, n_objects, arena, lnet_version))
+            check_signature(folder / "meta.json", PolicySignature.of(task, variant, n_objects, arena, lnet_version),
+                            allow)
             skills[task] = Skill.load(folder / POLICY_FILE, deterministic)
         return cls(skills["pick"], skills["drop"], skills["decision"])
 

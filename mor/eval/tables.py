@@ -50,6 +50,24 @@ def _eval(method: str, extra: str = "") -> str:
     return f"mor eval run --method {method}{extra}"
 
 
+POLYGON_LNET = "mor --setting polygon collect / build-dataset / train-lnet / calibrate-lnet / eval-lnet"
+
+
+def _in(setting: str, command: str) -> str:
+    """``command`` (a ``mor ...`` line) run in setting ``setting``'s workspace."""
+    return command.replace("mor ", f"mor --setting {setting} ", 1)
+
+
+def _objects_row(n: int) -> TableRow:
+    """Table 4's line for ``n`` objects: 3 is the main workspace's lnet row, the others a setting's."""
+    if n == 3:
+        return TableRow("3 objects: Ours (lnet)", _ours("lnet"), paper.TABLE4[3], _eval("lnet"))
+    setting = f"objects_{n}"
+    return TableRow(f"{n} object{'s' if n > 1 else ''}: Ours (lnet)", _ours("lnet", n_objects=n), paper.TABLE4[n],
+                    _in(setting, "mor policy train --variant gt_pose; ") + _in(setting, "mor policy train --variant "
+                                                                                 "lnet; ") + _in(setting, _eval("lnet")))
+
+
 TABLES: dict[int, TableSpec] = {
     1: TableSpec(1, "Our methods and the baselines (paper Table 1)", [
         TableRow("Policy w/ GT poses (gt_pose)", _ours("gt_pose"), paper.TABLE1["Policy w/ GT poses"], _eval("gt_pose")),
@@ -70,6 +88,20 @@ TABLES: dict[int, TableSpec] = {
         TableRow("Ours: policy + uncertainty (lnet)", _ours("lnet"), paper.TABLE2["Ours (Policy + uncertainty)"],
                  _eval("lnet")),
     ]),
+    3: TableSpec(3, "The polygon arena: L-Net retrained there, policies zero-shot or fine-tuned (paper Table 3)", [
+        TableRow("Baseline: CNN + ΔPose trained in the polygon arena (paper: ResNet50 + ΔPose)",
+                 _ours("baseline_delta_pose", arena="polygon", policy_arena="polygon", encoder=ANY),
+                 paper.TABLE3["ResNet50 + ΔPose"],
+                 "mor --setting polygon policy train --variant baseline_img / --variant baseline_delta_pose; "
+                 + _in("polygon", _eval("baseline_delta_pose"))),
+        TableRow("Ours (lnet), policies trained in rect: zero-shot", _ours("lnet", arena="polygon"),
+                 paper.TABLE3["W/o fine tuning"], f"{POLYGON_LNET}; " + _in("polygon", _eval("lnet", " --zero-shot"))),
+        TableRow("Ours (lnet), policies fine-tuned in the polygon arena",
+                 _ours("lnet", arena="polygon", policy_arena="polygon"), paper.TABLE3["Fine tuning"],
+                 f"{POLYGON_LNET}; mor --setting polygon policy train --variant lnet; "
+                 + _in("polygon", _eval("lnet"))),
+    ]),
+    4: TableSpec(4, "1 to 5 objects (paper Table 4)", [_objects_row(n) for n in range(1, 6)]),
 }
 
 

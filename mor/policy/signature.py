@@ -48,12 +48,22 @@ def write_signature(path: Path, signature: PolicySignature) -> None:
         partial.write_text(json.dumps(signature.model_dump(), indent=2) + "\n")
 
 
-def check_signature(path: Path, expected: PolicySignature) -> None:
-    """Raise ConfigError naming both sides when the policy at ``path`` (its meta.json) was trained otherwise."""
+def read_signature(path: Path) -> PolicySignature:
+    """The signature stored at ``path`` (a policy's meta.json); ConfigError naming it when it is missing."""
     if not path.is_file():
         raise ConfigError(f"{path}: no such policy metadata; train the policy first (mor policy train)")
-    found = PolicySignature.model_validate(json.loads(path.read_text()))
-    for field in ("task", "variant", "n_objects", "arena", "lnet_version"):
+    return PolicySignature.model_validate(json.loads(path.read_text()))
+
+
+#: what a zero-shot evaluation (a policy played in another arena, through that arena's L-Net) may differ in
+ZERO_SHOT_FIELDS = ("arena", "lnet_version")
+
+
+def check_signature(path: Path, expected: PolicySignature, allow: tuple[str, ...] = ()) -> None:
+    """Raise ConfigError naming both sides when the policy at ``path`` (its meta.json) was trained otherwise
+    (``allow``: fields that may differ, e.g. ``ZERO_SHOT_FIELDS``)."""
+    found = read_signature(path)
+    for field in (f for f in ("task", "variant", "n_objects", "arena", "lnet_version") if f not in allow):
         have, want = getattr(found, field), getattr(expected, field)
         if have != want:
             raise ConfigError(f"{path}: the policy was trained with {field}={have!r} but this run needs {want!r}; "

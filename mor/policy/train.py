@@ -175,6 +175,7 @@ def train_policy(
     if (out_dir / "log.csv").is_file():
         write_learning_curve(out_dir / "log.csv", out_dir / "learning_curve.png", label)
     summary = {"label": label, "steps": int(model.num_timesteps), "seed": seed, "warm_start": init_from is not None,
+               "warm_start_from": str(init_from[0]) if init_from is not None else None,
                "wall_seconds_this_run": round(wall, 1),
                "steps_per_second_this_run": round(remaining / wall, 1) if remaining > 0 else None,
                "params": params.model_dump(), "signature": signature.model_dump()}
