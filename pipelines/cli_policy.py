@@ -7,7 +7,8 @@ from typing import Annotated
 
 import typer
 
-from mor.config import DEFAULT_PARAMS, active_profile, load_profile
+from mor.config import DEFAULT_PARAMS, active_profile, load_profile, validated
+from mor.policy.params import EvalParams
 from mor.errors import ConfigError
 from mor.policy.names import BASELINE_VARIANTS, TASKS, VARIANTS
 from pipelines import paths
@@ -47,6 +48,10 @@ def eval_run(
                                                                 "*_nearest_rule, baseline_*, oracle or random.")],
     zero_shot: Annotated[bool, typer.Option("--zero-shot", help="In a setting (mor --setting NAME ...): play the "
                                                                 "main workspace's policies (paper Table 3).")] = False,
+    workers: Annotated[int | None, typer.Option(min=1, help="Jobs (one per task and seed) at once (default: the "
+                                                            "profile's evaluate.workers).")] = None,
+    backend: Annotated[str | None, typer.Option(help="process (this machine) or ray (Ray tasks; a local Ray "
+                                                     "instance unless one is running).")] = None,
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
@@ -54,7 +59,12 @@ def eval_run(
     from pipelines import evaluate  # noqa: PLC0415
 
     name = active_profile(profile, params)
-    row = evaluate.run(load_profile(name, params), name, method, zero_shot=zero_shot)
+    config = load_profile(name, params)
+    overrides = {key: value for key, value in (("workers", workers), ("backend", backend)) if value is not None}
+    if overrides:
+        config = config.model_copy(update={"evaluate": validated(
+            EvalParams, "--workers/--backend", **{**config.evaluate.model_dump(), **overrides})})
+    row = evaluate.run(config, name, method, zero_shot=zero_shot)
     summary = ", ".join(f"{k} {v['mean']:.3f} ± {v['std']:.3f}" for k, v in row["metrics"].items())
     typer.echo(f"{method}: {summary}")
 

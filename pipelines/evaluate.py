@@ -4,7 +4,8 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+import os
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +13,8 @@ from mor.config import Profile
 from mor.eval.card import write_results_card
 from mor.eval.methods import METHODS, MethodSpec, TrainedPolicies, method_spec
 from mor.eval.policy_card import write_policy_card
-from mor.eval.protocol import decider, metric_summaries, run_protocol
+from mor.data.parallel import unordered_map
+from mor.eval.protocol import EpisodeKey, decider, metric_summaries, play_records, run_protocol
 from mor.eval.video import write_policy_video
 from mor.eval.results import ROW_KEYS, arena_label, merge_rows
 from mor.policy.names import TASKS, VARIANTS
@@ -68,6 +70,18 @@ def policy_folders(method: MethodSpec, root: Path) -> dict[str, Path]:
     return {task: root / method.variant / task for task in tasks}
 
 
+def evaluate_job(job: tuple[Path, Profile, str, bool, list[EpisodeKey]]) -> list[dict[str, Any]]:
+    """One parallel evaluation job (a worker process or a Ray task): (the workspace folder, the profile, the
+    method's name, zero-shot, its episode keys) -> their records; the method's policies are loaded here."""
+    root, profile, method_name, zero_shot, keys = job
+    os.chdir(root)  # the workspace's relative paths (a Ray worker starts elsewhere)
+    os.environ.setdefault("LP_NUM_THREADS", "1")  # one llvmpipe render thread per worker
+    method = method_spec(method_name)
+    policies, tracker_factory = load_method(profile, method, zero_shot) if method.variant is not None else (None, None)
+    evaluate = profile.evaluate
+    return list(play_records(method, profile.sim, keys, policies, tracker_factory, evaluate.n_envs, evaluate.horizon))
+
+
 def run(profile: Profile, profile_name: str, method_name: str, progress: bool = True, zero_shot: bool = False
         ) -> dict[str, Any]:
     """Evaluate ``method_name`` with the profile's protocol; write its row to ``cards/results/rows/``.
@@ -83,8 +97,13 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
                        for task, folder in folders.items()}
         policy_arena = read_signature(folders["pick"] / "meta.json").arena
     name = f"{method.name}_zero_shot" if zero_shot else method.name
+    run_jobs = None
+    if protocol.workers > 1 or protocol.backend == "ray":
+        def run_jobs(jobs: list[list[EpisodeKey]]) -> Iterator[list[dict[str, Any]]]:
+            return unordered_map(evaluate_job, [(Path.cwd(), profile, method.name, zero_shot, job) for job in jobs],
+                                 protocol.workers, protocol.backend)
     records = run_protocol(method, sim, protocol.seeds, protocol.episodes, paths.EVAL / f"{name}.jsonl",
-                           policies, tracker_factory, protocol.n_envs, progress, protocol.horizon)
+                           policies, tracker_factory, protocol.n_envs, progress, protocol.horizon, run_jobs)
     row = {"method": method.name, "encoder": profile.policy.baseline.encoder if baseline else None,
            "arena": arena_label(sim.arena), "policy_arena": arena_label(policy_arena), "n_objects": sim.n_objects,
            "seeds": protocol.seeds, "episodes_per_seed": protocol.episodes, "train_steps": train_steps,

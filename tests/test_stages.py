@@ -151,3 +151,14 @@ def test_baseline_stages_train_evaluate_and_fill_table_1(workspace: Path) -> Non
     assert row["train_steps"] == {"pick": 64, "drop": 64}
     readme = (workspace / "cards/results/README.md").read_text()
     assert "| Baseline: CNN + Landmark (paper: ResNet18 + Landmark) [ours: compact] |" in readme
+
+
+@pytest.mark.parametrize("backend", ["process", "ray"])
+def test_parallel_evaluation_jobs_give_the_records_of_one_process(workspace: Path, backend: str) -> None:
+    """The protocol's jobs (one per task and seed) in 2 worker processes or as Ray tasks on a local Ray instance
+    write the same episodes as one process."""
+    _run("eval", "run", "--method", "oracle", "--profile", "tiny", "--workers", "1")
+    alone = sorted((workspace / "datasets/eval/oracle.jsonl").read_text().splitlines())
+    (workspace / "datasets/eval/oracle.jsonl").unlink()
+    _run("eval", "run", "--method", "oracle", "--profile", "tiny", "--workers", "2", "--backend", backend)
+    assert sorted((workspace / "datasets/eval/oracle.jsonl").read_text().splitlines()) == alone

@@ -7,7 +7,6 @@ Episode ``index`` of a collection with seed ``seed`` is ``sim-<seed>-<index:06d>
 from __future__ import annotations
 
 import json
-import multiprocessing as mp
 import os
 import time
 from collections.abc import Iterator
@@ -20,6 +19,7 @@ from tqdm import tqdm
 
 from mor.data.episode_io import EpisodeFileError, EpisodeHeader, EpisodeWriter, encode_png, read_metadata
 from mor.data.exploration import ExplorationParams, ExplorationPolicy
+from mor.data.parallel import unordered_map
 from mor.errors import MorError
 from mor.sim.config import SimConfig
 from mor.sim.rollout import episode_seed
@@ -177,23 +177,10 @@ class EpisodeCollector:
         self.env.close()
 
 
-_WORKER: EpisodeCollector | None = None
-
-
-def _init_worker(spec: CollectionSpec, out_dir: Path) -> None:
-    global _WORKER
-    os.environ.setdefault("LP_NUM_THREADS", "1")  # one llvmpipe render thread per worker process
-    _WORKER = EpisodeCollector(spec, out_dir)
-
-
-def _collect_in_worker(index: int) -> int:
-    assert _WORKER is not None
-    return _WORKER.collect(index)
-
-
-def _collect_batch(spec: CollectionSpec, out_dir: Path, batch: list[int]) -> list[int]:
-    """One Ray task: a fresh collector (one renderer) for a batch of episodes."""
-    os.environ.setdefault("LP_NUM_THREADS", "1")
+def _collect_batch(job: tuple[CollectionSpec, Path, list[int]]) -> list[int]:
+    """One worker job: a fresh collector (one renderer) for a batch of episodes -> their frame counts."""
+    spec, out_dir, batch = job
+    os.environ.setdefault("LP_NUM_THREADS", "1")  # one llvmpipe render thread per worker
     collector = EpisodeCollector(spec, out_dir)
     try:
         return [collector.collect(index) for index in batch]
@@ -201,36 +188,16 @@ def _collect_batch(spec: CollectionSpec, out_dir: Path, batch: list[int]) -> lis
         collector.close()
 
 
-def _run_processes(spec: CollectionSpec, out_dir: Path, indices: list[int], workers: int) -> Iterator[int]:
-    if workers <= 1:
-        collector = EpisodeCollector(spec, out_dir)
-        try:
-            yield from (collector.collect(i) for i in indices)
-        finally:
-            collector.close()
+def _run(spec: CollectionSpec, out_dir: Path, indices: list[int], workers: int, backend: str) -> Iterator[int]:
+    """Each collected episode's frame count, as it finishes: in this process (one worker, no Ray), else in
+    batches of up to 16 episodes as ``unordered_map`` jobs (worker processes or Ray tasks)."""
+    if workers <= 1 and backend == "process":
+        yield from _collect_batch((spec, out_dir, indices))
         return
-    with mp.get_context("spawn").Pool(workers, initializer=_init_worker, initargs=(spec, out_dir)) as pool:
-        yield from pool.imap_unordered(_collect_in_worker, indices, chunksize=2)
-
-
-def _run_ray(spec: CollectionSpec, out_dir: Path, indices: list[int], workers: int) -> Iterator[int]:
-    import ray  # noqa: PLC0415 - optional backend
-
-    started_here = not ray.is_initialized()
-    if started_here:
-        ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, configure_logging=False)
-
-    collect_batch = ray.remote(num_cpus=1)(_collect_batch)
-    batch_size = max(1, min(16, len(indices) // (4 * workers) or 1))
-    pending = [collect_batch.remote(spec, out_dir, indices[i:i + batch_size]) for i in range(0, len(indices), batch_size)]
-    try:
-        while pending:
-            ready, pending = ray.wait(pending, num_returns=1)
-            for frames in ray.get(ready[0]):
-                yield frames
-    finally:
-        if started_here:
-            ray.shutdown()
+    size = max(1, min(16, len(indices) // (4 * workers) or 1))
+    jobs = [(spec, out_dir, indices[i:i + size]) for i in range(0, len(indices), size)]
+    for frames in unordered_map(_collect_batch, jobs, workers, backend):
+        yield from frames
 
 
 def collect(spec: CollectionSpec, out_dir: Path, episodes: int, workers: int, backend: str = "process",
@@ -247,13 +214,12 @@ def collect(spec: CollectionSpec, out_dir: Path, episodes: int, workers: int, ba
     out_dir.mkdir(parents=True, exist_ok=True)
     check_collection(out_dir, shape)
     indices = pending_indices(out_dir, spec.seed, episodes, rejected)
-    runner = {"process": _run_processes, "ray": _run_ray}.get(backend)
-    if runner is None:
+    if backend not in ("process", "ray"):
         raise ValueError(f"backend: unknown backend {backend!r}; choose 'process' or 'ray'")
     frames = 0
     start = time.perf_counter()
     with tqdm(total=episodes, initial=episodes - len(indices), desc="collect", unit="ep", disable=not progress) as bar:
-        for count in runner(spec, out_dir, indices, workers) if indices else ():
+        for count in _run(spec, out_dir, indices, workers, backend) if indices else ():
             frames += count
             bar.update(1)
             bar.set_postfix(frames_per_s=f"{frames / (time.perf_counter() - start):.0f}", refresh=False)

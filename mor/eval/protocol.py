@@ -83,34 +83,62 @@ def episode_keys(seeds: list[int], episodes: int) -> Iterator[tuple[str, int, in
                 yield task, seed, episode
 
 
-def run_protocol(
-    method: MethodSpec, sim: SimConfig, seeds: list[int], episodes: int, records_path: Path,
-    policies: TrainedPolicies | None = None, tracker_factory: Callable[[int], BatchTracker] | None = None,
-    n_envs: int = 8, progress: bool = True, horizon: int | None = None,
-) -> list[dict[str, Any]]:
-    """Play every (task, seed, episode) not yet in ``records_path`` (JSON Lines, appended: resumable).
+EpisodeKey = tuple[str, int, int]  # (task, seed, episode)
+#: plays the given jobs (lists of episode keys) and yields their records as they come, a few at a time, any order
+RunJobs = Callable[[list[list[EpisodeKey]]], Iterator[list[dict[str, Any]]]]
 
-    Learned methods play ``n_envs`` episodes in lockstep (``mor.eval.lockstep``) with a tracker from
-    ``tracker_factory(n)``; the scripted ones play one at a time. ``horizon``: a cap on every episode's steps.
-    """
+
+def protocol_jobs(keys: list[EpisodeKey]) -> list[list[EpisodeKey]]:
+    """``keys`` grouped into independent jobs, one per (task, seed): the unit a parallel evaluation runs."""
+    jobs: dict[tuple[str, int], list[EpisodeKey]] = {}
+    for key in keys:
+        jobs.setdefault(key[:2], []).append(key)
+    return list(jobs.values())
+
+
+def play_records(method: MethodSpec, sim: SimConfig, keys: list[EpisodeKey], policies: TrainedPolicies | None,
+                 tracker_factory: Callable[[int], BatchTracker] | None, n_envs: int = 8, horizon: int | None = None
+                 ) -> Iterator[dict[str, Any]]:
+    """Play the episodes ``keys`` and yield each one's record as it ends. Learned methods play ``n_envs``
+    episodes in lockstep (``mor.eval.lockstep``) with a tracker from ``tracker_factory(n)``; the scripted ones play
+    one at a time. ``horizon``: a cap on every episode's steps."""
     import torch  # noqa: PLC0415
 
     torch.set_num_threads(1)  # small batched forwards: one thread is several times faster on 2 cores (DESIGN.md)
+    env_kwargs = {} if horizon is None else {"horizon": horizon}
+    for (task, seed, episode), outcome in _play(method, sim, keys, policies, tracker_factory, n_envs, env_kwargs):
+        yield {"method": method.name, "task": task, "seed": seed, "episode": episode,
+               "reset_seed": episode_seed(seed, episode), **outcome}
+
+
+def run_protocol(
+    method: MethodSpec, sim: SimConfig, seeds: list[int], episodes: int, records_path: Path,
+    policies: TrainedPolicies | None = None, tracker_factory: Callable[[int], BatchTracker] | None = None,
+    n_envs: int = 8, progress: bool = True, horizon: int | None = None, run_jobs: RunJobs | None = None,
+) -> list[dict[str, Any]]:
+    """Play every (task, seed, episode) not yet in ``records_path`` (JSON Lines, appended as records come:
+    resumable) and return all of them in protocol order.
+
+    In this process (``play_records`` with ``policies`` and ``tracker_factory``), or, with ``run_jobs``, by
+    whatever runs the ``protocol_jobs`` (``pipelines.evaluate``: worker processes or Ray tasks).
+    """
     done = {(r["task"], r["seed"], r["episode"]): r for r in read_records(records_path)}
     todo = [key for key in episode_keys(seeds, episodes) if key not in done]
     with atomic_output(records_path) as partial:  # drop a line cut short by a kill before appending
         partial.write_text("".join(json.dumps(r) + "\n" for r in done.values()))
+    if run_jobs is None:
+        def run_jobs(jobs: list[list[EpisodeKey]]) -> Iterator[list[dict[str, Any]]]:
+            keys = [key for job in jobs for key in job]
+            return ([record] for record in play_records(method, sim, keys, policies, tracker_factory, n_envs,
+                                                         horizon))
     with records_path.open("a") as handle, tqdm(total=len(todo), desc=f"eval {method.name}", unit="ep",
                                                 disable=not progress, dynamic_ncols=True) as bar:
-        env_kwargs = {} if horizon is None else {"horizon": horizon}
-        for key, outcome in _play(method, sim, todo, policies, tracker_factory, n_envs, env_kwargs):
-            task, seed, episode = key
-            record = {"method": method.name, "task": task, "seed": seed, "episode": episode,
-                      "reset_seed": episode_seed(seed, episode), **outcome}
-            handle.write(json.dumps(record) + "\n")
+        for records in run_jobs(protocol_jobs(todo)) if todo else ():
+            for record in records:
+                handle.write(json.dumps(record) + "\n")
+                done[(record["task"], record["seed"], record["episode"])] = record
             handle.flush()
-            done[key] = record
-            bar.update(1)
+            bar.update(len(records))
     return [done[key] for key in episode_keys(seeds, episodes)]
 
 

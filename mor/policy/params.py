@@ -70,6 +70,9 @@ class EvalParams(_Strict):
     seeds: list[int] = Field(default_factory=lambda: [0, 1, 2, 3, 4], min_length=1)
     episodes: int = Field(100, ge=1, le=100_000)
     n_envs: int = Field(8, ge=1, le=256, description="episodes played in lockstep (one batched forward each step)")
+    workers: int = Field(1, ge=1, le=1024, description="jobs (one per task and seed) played at once")
+    backend: Literal["process", "ray"] = Field("process", description="the jobs run in worker processes of this "
+                                                                      "machine or as Ray tasks (a Ray cluster)")
     horizon: int | None = Field(None, ge=1, description="cap every episode at this many steps (the tiny profile's "
                                                         "tests); None: the tasks' own horizons, 150 / 150 / 1,000")
     bootstrap_resamples: int = Field(10_000, ge=100)
