@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from dataclasses import asdict
 from typing import Any
 
@@ -13,6 +14,7 @@ from pipelines.lnet_io import load_trained
 
 
 def run(profile: Profile) -> dict[str, Any]:
+    started = time.perf_counter()
     runner = load_trained(profile, paths.LNET / "model.pt", calibrated=False)
     predictions = predict(runner.model, paths.LEROBOT / "validation", profile.lnet.calibration.max_episodes,
                           runner.device)
@@ -20,6 +22,7 @@ def run(profile: Profile) -> dict[str, Any]:
     payload = {**asdict(calibration), "dataset_version": runner.dataset_version,
                "fitted_on": {"split": "validation", "frames": int(len(predictions.frame))},
                "validation_before": metrics(predictions)["coverage"],
-               "validation_after": metrics(calibration.apply(predictions))["coverage"]}
+               "validation_after": metrics(calibration.apply(predictions))["coverage"],
+               "seconds": round(time.perf_counter() - started, 1)}
     write_json(paths.LNET_CALIBRATION, payload)
     return payload

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+import time
 from dataclasses import asdict
 from typing import Any
 
@@ -28,6 +29,7 @@ ORACLE_SEED = 1000  # episode seeds 1e9 + i: disjoint from the collection's (see
 
 
 def run(profile: Profile) -> dict[str, Any]:
+    started = time.perf_counter()
     card = paths.LNET_CARD
     card.mkdir(parents=True, exist_ok=True)
     runner = load_trained(profile, paths.LNET / "model.pt")
@@ -46,6 +48,7 @@ def run(profile: Profile) -> dict[str, Any]:
     if profile.lnet.oracle_episodes:  # the episodes the policies will produce: oracle-driven, tracked live
         live = predict_live(runner, profile.sim, "oracle", profile.lnet.oracle_episodes, ORACLE_SEED)
         result["oracle"] = {"seed": ORACLE_SEED, **scored(live)}
+    result["seconds"] = round(time.perf_counter() - started, 1)  # the metrics; the figures below are not counted
     write_json(card / "metrics.json", result)
 
     reliability = {f"{name} ({when})": result[key]["reliability"][name]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,7 @@ from mor.policy.observations import (BatchTracker, GroundTruthBatchTracker, Rend
                                      has_uncertainty)
 from mor.sim.arena import Arena
 from pipelines import paths
+from pipelines.compute import update_compute
 from pipelines.io import write_json
 from mor.policy.signature import read_signature
 from pipelines.train_policy import lnet_runner
@@ -102,12 +104,14 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
         def run_jobs(jobs: list[list[EpisodeKey]]) -> Iterator[list[dict[str, Any]]]:
             return unordered_map(evaluate_job, [(Path.cwd(), profile, method.name, zero_shot, job) for job in jobs],
                                  protocol.workers, protocol.backend)
+    started = time.perf_counter()
     records = run_protocol(method, sim, protocol.seeds, protocol.episodes, paths.EVAL / f"{name}.jsonl",
                            policies, tracker_factory, protocol.n_envs, progress, protocol.horizon, run_jobs)
     row = {"method": method.name, "encoder": profile.policy.baseline.encoder if baseline else None,
            "arena": arena_label(sim.arena), "policy_arena": arena_label(policy_arena), "n_objects": sim.n_objects,
            "seeds": protocol.seeds, "episodes_per_seed": protocol.episodes, "train_steps": train_steps,
-           "metrics": metric_summaries(records, protocol.bootstrap_resamples), "profile": profile_name}
+           "metrics": metric_summaries(records, protocol.bootstrap_resamples), "profile": profile_name,
+           "wall_seconds": round(time.perf_counter() - started, 1), "workers": protocol.workers}
     write_json(paths.RESULTS_CARD / "rows" / f"{name}.json", row)
     return row
 
@@ -135,7 +139,8 @@ def collect_results(profile_name: str) -> Path:
     if existing.get("profile") != profile_name:
         existing = {"profile": profile_name, "rows": []}
     merged = merge_rows(existing["rows"], [r for r in rows if r.get("profile") == profile_name])
-    results = {"profile": profile_name, "row_keys": list(ROW_KEYS), "rows": merged}
+    results = {"profile": profile_name, "row_keys": list(ROW_KEYS), "rows": merged,
+               "compute": update_compute(paths.RESULTS_CARD / "compute.json", profile_name)}
     write_json(path, results)
     write_results_card(results, paths.RESULTS_CARD)
     return path

@@ -151,6 +151,11 @@ def test_baseline_stages_train_evaluate_and_fill_table_1(workspace: Path) -> Non
     assert row["train_steps"] == {"pick": 64, "drop": 64}
     readme = (workspace / "cards/results/README.md").read_text()
     assert "| Baseline: CNN + Landmark (paper: ResNet18 + Landmark) [ours: compact] |" in readme
+    compute = json.loads((workspace / "cards/results/compute.json").read_text())
+    assert set(compute["stages"]) == {"policy train baseline_img pick", "policy train baseline_img drop",
+                                      "policy train baseline_landmark drop", "eval run baseline_landmark"}
+    assert compute["total_seconds"] == pytest.approx(sum(compute["stages"].values()), abs=0.2)
+    assert "## Compute" in readme
 
 
 @pytest.mark.parametrize("backend", ["process", "ray"])

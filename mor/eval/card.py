@@ -26,6 +26,23 @@ def write_results_card(results: dict[str, Any], folder: Path) -> Path:
         figure = write_table_figure(spec, rows, folder / f"table{number}.png")
         if figure is not None:
             parts += ["", f"![Table {number}]({figure.name})"]
+    parts += compute_section(results.get("compute"))
     with atomic_output(folder / "README.md") as partial:
         partial.write_text("\n".join(parts) + "\n")
     return folder / "README.md"
+
+
+def compute_section(compute: dict[str, Any] | None) -> list[str]:
+    """The card's "Compute" section: each stage's wall time (compute.json) and their sum against the target."""
+    if not compute or not compute.get("stages"):
+        return []
+    total, target = compute["total_seconds"], compute["target_seconds"]
+    verdict = "within" if total <= target else "over"
+    lines = ["", "## Compute", "",
+             f"Wall time of each stage's last run on the machine that ran it (from the files the stages write, kept "
+             f"in `compute.json`): **{total / 3600:.2f} h in all, {verdict} the {target / 3600:.0f} h target** for "
+             "this profile from an empty checkout. A resumed stage counts from its restart, and stages that shared "
+             "the machine with others ran slower than they would alone.", "",
+             "| stage | minutes |", "|---|---|"]
+    lines += [f"| {stage} | {seconds / 60:.1f} |" for stage, seconds in compute["stages"].items()]
+    return lines

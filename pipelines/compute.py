@@ -1,0 +1,75 @@
+"""The wall time of every stage, read from the files the stages write, for the results card: the `default`
+profile's target is an empty checkout to the four tables in at most 2 hours on 2 CPU cores.
+
+Kept in ``cards/results/compute.json`` (committed): a stage's time is replaced when its source file is there
+and kept otherwise, so a fresh clone (whose ``datasets/`` is empty) still shows what the last full run took.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from pipelines import paths
+from pipelines.io import write_json
+
+TARGET_SECONDS = 2 * 3600
+
+#: stage -> (its file, the seconds in it)
+FILE_SOURCES: dict[str, tuple[Path, Callable[[dict[str, Any]], float]]] = {
+    "collect": (paths.COLLECT_STATS, lambda d: d["seconds"]),
+    "build-dataset": (paths.BUILD_STATS, lambda d: d["seconds"]["total"]),
+    "validate": (paths.VALIDATION_REPORT, lambda d: d["seconds"]),
+    "train-lnet": (paths.LNET / "train_summary.json", lambda d: d["seconds"]),
+    "calibrate-lnet": (paths.LNET_CALIBRATION, lambda d: d["seconds"]),
+    "eval-lnet": (paths.LNET_CARD / "metrics.json", lambda d: d["seconds"]),
+}
+
+
+def _read(path: Path) -> dict[str, Any] | None:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def stage_seconds(root: Path) -> dict[str, float]:
+    """Each stage's wall seconds in the workspace at ``root``, where its file says (a policy's or an evaluation's
+    last run: a resumed one counts from its restart)."""
+    found: dict[str, float] = {}
+    for stage, (path, seconds) in FILE_SOURCES.items():
+        document = _read(root / path)
+        if document is not None and _has(document, seconds):
+            found[stage] = float(seconds(document))
+    for summary in sorted((root / paths.POLICY_CARD).glob("*/*/summary.json")):
+        document = _read(summary) or {}
+        if document.get("wall_seconds_this_run") is not None:
+            found[f"policy train {summary.parent.parent.name} {summary.parent.name}"] = document["wall_seconds_this_run"]
+    for row_file in sorted((root / paths.RESULTS_CARD / "rows").glob("*.json")):
+        document = _read(row_file) or {}
+        if document.get("wall_seconds") is not None:
+            found[f"eval run {row_file.stem}"] = document["wall_seconds"]
+    return found
+
+
+def _has(document: dict[str, Any], seconds: Callable[[dict[str, Any]], float]) -> bool:
+    try:
+        seconds(document)
+    except (KeyError, TypeError):
+        return False
+    return True
+
+
+def update_compute(path: Path, profile: str) -> dict[str, Any]:
+    """Merge this workspace's and every setting's stage times into ``path`` (compute.json) and return it."""
+    existing = _read(path) or {}
+    stages = dict(existing.get("stages", {})) if existing.get("profile") == profile else {}
+    stages.update(stage_seconds(Path(".")))
+    for folder in sorted(paths.SETTINGS.glob("*")):
+        stages.update({f"{folder.name}: {stage}": s for stage, s in stage_seconds(folder).items()})
+    result = {"profile": profile, "stages": dict(sorted(stages.items())),
+              "total_seconds": round(sum(stages.values()), 1), "target_seconds": TARGET_SECONDS}
+    write_json(path, result)
+    return result
