@@ -51,7 +51,7 @@ def load_method(profile: Profile, method: MethodSpec, zero_shot: bool = False
                                                  sim.image_size, profile.policy.skills_deterministic)
         return policies, lambda n: RenderingTruthTracker()
     runner = lnet_runner(method.variant, profile)
-    version = runner.dataset_version if runner is not None else None
+    version = runner.identity if runner is not None else None
     policies = TrainedPolicies.load(root, method.variant, sim.n_objects, sim.arena, version,
                                     with_decision=method.decision == "learned",
                                     deterministic=profile.policy.skills_deterministic, zero_shot=zero_shot)

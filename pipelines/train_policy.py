@@ -85,7 +85,7 @@ def run(profile: Profile, variant: Variant | BaselineVariant, tasks: tuple[Task,
     if variant in BASELINE_VARIANTS:
         return run_baseline(profile, variant, tasks, progress)
     runner = lnet_runner(variant, profile)
-    version = runner.dataset_version if runner is not None else None
+    version = runner.identity if runner is not None else None
     summaries = []
     policy = profile.policy
     for task in tasks:

@@ -13,6 +13,7 @@ windows use. One forward pass for all N environments, without gradients. The est
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -65,12 +66,20 @@ class LNetRunner:
     """A trained L-Net with its calibration, stepped one frame at a time over N environments."""
 
     def __init__(self, model: LNet, calibration: Calibration, image_size: int, dataset_version: str,
-                 device: torch.device | str = "cpu") -> None:
+                 device: torch.device | str = "cpu", checkpoint_digest: str | None = None) -> None:
         self.model = model.to(device).eval()
         self.calibration = calibration
         self.image_size = image_size
         self.dataset_version = dataset_version
+        self.checkpoint_digest = checkpoint_digest
         self.device = torch.device(device)
+
+    @property
+    def identity(self) -> str:
+        """What a policy trained through this L-Net records (``lnet_version``): the dataset version and, for a
+        loaded checkpoint, the first 12 hex digits of its file's SHA-256 (another training run is another L-Net)."""
+        return self.dataset_version if self.checkpoint_digest is None else (
+            f"{self.dataset_version}-{self.checkpoint_digest}")
 
     @property
     def config(self) -> LNetConfig:
@@ -156,4 +165,6 @@ def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str
     saved = load_checkpoint(path, expected or {}, device)
     version = str(saved["dataset_version"])
     calibration = read_calibration(path.parent / CALIBRATION_FILE, version) if calibrated else Calibration()
-    return LNetRunner(model_from_checkpoint(saved, device), calibration, int(saved["image_size"]), version, device)
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+    return LNetRunner(model_from_checkpoint(saved, device), calibration, int(saved["image_size"]), version, device,
+                      digest)

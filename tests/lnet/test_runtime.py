@@ -135,6 +135,15 @@ def test_the_committed_model_loads_with_one_call_and_checks_what_it_was_made_wit
                                                          "dataset_version": "elsewhere"}))
     with pytest.raises(MorError, match="calibration dataset_version is elsewhere but the checkpoint's is"):
         load_lnet(alone)
+    # Another training run on the same data is another L-Net to the policies: its identity names the file's bytes.
+    retrained = tmp_path / "retrained" / "model.pt"
+    retrained.parent.mkdir()
+    payload = torch.load(committed, weights_only=False)
+    payload["model"] = {key: value + 1e-3 if value.is_floating_point() else value
+                        for key, value in payload["model"].items()}
+    torch.save(payload, retrained)
+    other_runner = load_lnet(retrained, calibrated=False)
+    assert runner.identity.startswith(saved["dataset_version"] + "-") and other_runner.identity != runner.identity
 
 
 def test_streaming_benchmark_times_the_environments_and_the_lnet_in_one_run() -> None:
