@@ -21,7 +21,6 @@ from mor.sim.rules import N_ACTIONS
 K = MAX_OBJECTS
 _ABSENT = N_CLASSES  # embedding index of an absent slot
 _NO_ACTION = N_ACTIONS  # one-hot index of "no previous action"
-FINE_CELLS = 8  # side of the finer map the ``spatial`` object head attends over
 _FIELDS = ("agent_mean", "agent_tril", "heading", "kappa", "object_mean", "object_tril")  # of a PoseEstimate
 
 
@@ -59,7 +58,6 @@ class CompactEncoder(nn.Module):
     """
 
     channels = 128  # of the last conv layer, i.e. of the spatial map
-    fine_channels = 128  # of the third conv layer, the map ``encode_fine`` returns
 
     def __init__(self, feature_dim: int) -> None:
         super().__init__()
@@ -74,13 +72,6 @@ class CompactEncoder(nn.Module):
         spatial = self.features[:-1](images)
         return self.project(spatial.flatten(1)), spatial
 
-    def encode_fine(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """``encode`` plus the third conv layer's map resampled to 8x8, (N, 128, 8, 8) (its own size at 64 px):
-        twice the 4x4 map's resolution, one cell per 7.5 degrees of the 60 degree view at 64 px."""
-        fine = self.features[:9](images)  # three (conv, norm, relu) blocks
-        spatial = self.features[9:-1](fine)
-        return self.project(spatial.flatten(1)), spatial, nn.functional.adaptive_avg_pool2d(fine, FINE_CELLS)
-
     def forward(self, images: torch.Tensor) -> torch.Tensor:
         return self.encode(images)[0]
 
@@ -94,7 +85,6 @@ class ResNetEncoder(nn.Module):
 
         self.backbone = getattr(models, f"resnet{depth}")(weights=None)
         self.channels = self.backbone.fc.in_features  # of the last stage's map: 512 (ResNet18) or 2048 (ResNet50)
-        self.fine_channels = self.channels // 2  # of the third stage's map, which ``encode_fine`` returns
         self.backbone.fc = nn.Sequential(nn.Linear(self.channels, feature_dim), nn.ReLU())
 
     def encode(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -103,14 +93,6 @@ class ResNetEncoder(nn.Module):
         stem = net.maxpool(net.relu(net.bn1(net.conv1(images))))
         last = net.layer4(net.layer3(net.layer2(net.layer1(stem))))
         return net.fc(net.avgpool(last).flatten(1)), nn.functional.adaptive_avg_pool2d(last, 4)
-
-    def encode_fine(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """``encode`` plus the third stage's map resampled to 8x8, (N, channels / 2, 8, 8)."""
-        net = self.backbone
-        third = net.layer3(net.layer2(net.layer1(net.maxpool(net.relu(net.bn1(net.conv1(images)))))))
-        last = net.layer4(third)
-        return (net.fc(net.avgpool(last).flatten(1)), nn.functional.adaptive_avg_pool2d(last, 4),
-                nn.functional.adaptive_avg_pool2d(third, FINE_CELLS))
 
     def forward(self, images: torch.Tensor) -> torch.Tensor:
         return self.encode(images)[0]
@@ -145,32 +127,6 @@ class ObjectAttention(nn.Module):
         return torch.einsum("nks,nsc->nkc", scores.softmax(-1), keys)
 
 
-class SpatialObjectHead(nn.Module):
-    """Each object slot's class embedding attends over the encoder's finer 8x8 map (``encode_fine``), and the
-    attention's expected image position is returned explicitly (a soft-argmax), so the head reads where the object
-    is as two numbers instead of decoding it from features (our addition; ``object_head: spatial``).
-
-    fine (N, C, 8, 8), embedded (N, K, E) -> (N, K, C + 4): the attention-weighted cells (each cell's feature plus
-    a learned embedding of its position), the expected cell centre (u right, v down, both in [-1, 1] across the
-    image) and the attention's standard deviation along u and v (small when one spot holds the class).
-    """
-
-    def __init__(self, channels: int, embedding_dim: int) -> None:
-        super().__init__()
-        self.query = nn.Linear(embedding_dim, channels)
-        self.position = nn.Parameter(0.02 * torch.randn(FINE_CELLS * FINE_CELLS, channels))
-        centres = (torch.arange(FINE_CELLS, dtype=torch.float32) + 0.5) / FINE_CELLS * 2.0 - 1.0
-        v, u = torch.meshgrid(centres, centres, indexing="ij")  # row-major, as ``flatten`` orders the cells
-        self.register_buffer("grid", torch.stack([u.flatten(), v.flatten()], -1), persistent=False)  # (64, 2)
-
-    def forward(self, fine: torch.Tensor, embedded: torch.Tensor) -> torch.Tensor:
-        keys = fine.flatten(2).transpose(1, 2) + self.position  # (N, 64, C)
-        weights = (torch.einsum("nkc,nsc->nks", self.query(embedded), keys) / keys.shape[-1] ** 0.5).softmax(-1)
-        where = weights @ self.grid  # (N, K, 2)
-        spread = torch.sqrt(((weights @ self.grid.pow(2)) - where.pow(2)).clamp(min=1e-6))
-        return torch.cat([torch.einsum("nks,nsc->nkc", weights, keys), where, spread], -1)
-
-
 def _agent_distribution(raw: torch.Tensor) -> tuple[torch.Tensor, ...]:
     """(..., 8) -> mean (..., 2), tril (..., 2, 2), heading (...), kappa (...)."""
     return raw[..., :2], scale_tril(raw[..., 2:5]), torch.atan2(raw[..., 6], raw[..., 5]), positive(raw[..., 7], MIN_KAPPA)
@@ -185,21 +141,15 @@ class PoseNet(nn.Module):
         self.embed = nn.Embedding(N_CLASSES + 1, config.class_embedding_dim)
         self.agent_head = _mlp(config.feature_dim, config.mlp_hidden, 8)
         object_inputs = config.feature_dim + config.class_embedding_dim
-        self.attention: ObjectAttention | SpatialObjectHead | None = None
+        self.attention = None
         if config.object_head == "attention":
             self.attention = ObjectAttention(self.encoder.channels, config.class_embedding_dim)
             object_inputs += self.encoder.channels
-        elif config.object_head == "spatial":
-            self.attention = SpatialObjectHead(self.encoder.fine_channels, config.class_embedding_dim)
-            object_inputs += self.encoder.fine_channels + 4
         self.object_head = _mlp(object_inputs, config.mlp_hidden, 6 if config.visibility else 5)
 
     def forward(self, images: torch.Tensor, classes: torch.Tensor) -> PoseEstimate:
         """images (N, 3, H, W), classes (N, K) -> PoseEstimate with leading dim N (objects in the ego frame)."""
-        if isinstance(self.attention, SpatialObjectHead):
-            features, _, spatial = self.encoder.encode_fine(images)
-        else:
-            features, spatial = self.encoder.encode(images)
+        features, spatial = self.encoder.encode(images)
         mean, tril, heading, kappa = _agent_distribution(self.agent_head(features))
         embedded = self.embed(torch.where(classes >= 0, classes, torch.full_like(classes, _ABSENT)))
         object_inputs = [features.unsqueeze(1).expand(-1, K, -1), embedded]

@@ -25,11 +25,11 @@ class LNetConfig(BaseModel):
         False, description="a per-object visibility head on the PoseNet (BCE against the dataset's "
                            "state.object_visible), its ego object NLL scored only where the object is visible, and "
                            "the tracker's measurement weighted by the predicted visibility (our addition)")
-    object_head: Literal["global", "attention", "spatial"] = Field(
-        "global", description="object positions from the image's global feature (the paper's MLP), from the "
-                              "cells of the encoder's 4x4 map that each object's class attends to (attention), or "
-                              "from its finer 8x8 map with the attended image position given explicitly (spatial; "
-                              "mor.lnet.model.SpatialObjectHead) (our additions)")
+    object_head: Literal["global", "attention"] = Field(
+        "global", description="object positions from the image's global feature (the paper's MLP) or from the "
+                              "cells of the encoder's map that each object's class attends to (our addition; "
+                              "trained per frame at equal budgets, its ego error on visible objects within 2 m was "
+                              "about 0.1 m, the global head's about 0.3 m)")
     detach_visibility: bool = Field(
         False, description="with visibility and the filter: the filter weighs each measurement by the predicted "
                            "visibility without passing the tracker's loss back into the visibility head, which then "

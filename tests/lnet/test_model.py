@@ -10,7 +10,7 @@ from mor.lnet.calibration import Calibration
 from mor.lnet.evaluate import NOMINAL_2D, Predictions, fit_calibration, metrics
 from mor.lnet.frames import ego_to_world, world_to_ego
 from mor.lnet.loss import lnet_loss, nll_terms, previous_actions
-from mor.lnet.model import LNet, ObjectAttention, SpatialObjectHead
+from mor.lnet.model import LNet, ObjectAttention
 from mor.lnet.params import LNetConfig
 from mor.sim import geometry
 
@@ -41,7 +41,7 @@ def test_torch_frames_agree_with_the_simulator_geometry() -> None:
 
 
 @pytest.mark.parametrize(("tracker", "visibility"), [("lstm", False), ("lstm", True), ("filter", True)])
-@pytest.mark.parametrize("object_head", ["global", "attention", "spatial"])
+@pytest.mark.parametrize("object_head", ["global", "attention"])
 @pytest.mark.parametrize("encoder", ["compact", "resnet18"])
 def test_lnet_shapes(encoder: str, object_head: str, tracker: str, visibility: bool) -> None:
     model = LNet(SMALL.model_copy(update={"encoder": encoder, "object_head": object_head, "tracker": tracker,
@@ -70,23 +70,6 @@ def test_attention_finds_each_object_in_its_own_cells() -> None:
     attended = attention(spatial, torch.tensor([[[1.0, 0.0], [0.0, 1.0]]]))
     torch.testing.assert_close(attended[0, 0, :2], torch.tensor([1.0, 0.0]), atol=1e-3, rtol=0)
     torch.testing.assert_close(attended[0, 1, :2], torch.tensor([0.0, 1.0]), atol=1e-3, rtol=0)
-
-
-def test_spatial_head_returns_the_image_position_its_class_lights_up() -> None:
-    head = SpatialObjectHead(channels=4, embedding_dim=2)
-    with torch.no_grad():
-        head.query.weight.copy_(torch.tensor([[40.0, 0.0], [0.0, 40.0], [0.0, 0.0], [0.0, 0.0]]))
-        head.query.bias.zero_()
-        head.position.zero_()
-    fine = torch.zeros(1, 4, 8, 8)
-    fine[0, 0, 1, 6] = 1.0  # class 0: row 1 (near the top), column 6 (right); class 1: row 7, column 0
-    fine[0, 1, 7, 0] = 1.0
-    out = head(fine, torch.tensor([[[1.0, 0.0], [0.0, 1.0]]]))
-    assert out.shape == (1, 2, 4 + 4)
-    # cell centres in [-1, 1]: column c -> u = (c + 0.5) / 4 - 1, row r -> v = (r + 0.5) / 4 - 1
-    torch.testing.assert_close(out[0, 0, 4:6], torch.tensor([0.625, -0.625]), atol=2e-3, rtol=0)
-    torch.testing.assert_close(out[0, 1, 4:6], torch.tensor([-0.875, 0.875]), atol=2e-3, rtol=0)
-    assert torch.all(out[0, :, 6:] < 0.05)  # one spot: no spread
 
 
 @pytest.mark.parametrize("detach", [False, True])
