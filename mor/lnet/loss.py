@@ -49,33 +49,39 @@ def nll_terms(estimate: PoseEstimate, agent_pose: torch.Tensor, object_positions
     }
 
 
+def _summed(terms: dict[str, torch.Tensor], prefix: str, parts: dict[str, float]) -> torch.Tensor:
+    """The sum of ``terms``, each also logged into ``parts`` as ``prefix_name`` (a float)."""
+    total = torch.zeros(())
+    for term, value in terms.items():
+        parts[f"{prefix}_{term}"] = float(value.detach())
+        total = total + value
+    return total
+
+
+def posenet_loss(single: PoseEstimate, batch: dict[str, torch.Tensor], beta: float = 0.0
+                 ) -> tuple[torch.Tensor, dict[str, float]]:
+    """The PoseNet's per-frame loss and its parts (floats). With a visibility head (``single.visibility_logit``),
+    the visibility BCE over present objects, and the ego object terms only on frames where the object is visible
+    (``batch["visible"]``); without one, on every present object."""
+    present = batch["object_mask"].unsqueeze(1)
+    mask, terms = present, {}
+    if single.visibility_logit is not None:
+        mask = batch["visible"] & present
+        terms["visibility"] = _masked_mean(F.binary_cross_entropy_with_logits(
+            single.visibility_logit, mask.to(single.visibility_logit.dtype), reduction="none"), present)
+    terms = {**nll_terms(single, batch["agent_pose"], batch["object_positions"], mask, beta), **terms}
+    parts: dict[str, float] = {}
+    return _summed(terms, "posenet", parts), parts
+
+
 def lnet_loss(single: PoseEstimate, tracked: PoseEstimate, batch: dict[str, torch.Tensor],
               beta: float = 0.0) -> tuple[torch.Tensor, dict]:
-    """Total loss (PoseNet terms + tracker terms) and its parts as floats, for logging.
-
-    The tracker is scored on every present object on every frame (its belief must be honest when unseen too).
-    With a visibility head (``single.visibility_logit``), the PoseNet adds the visibility BCE over present objects
-    and scores its ego object terms only on frames where the object is visible (``batch["visible"]``).
-    """
+    """Total loss (``posenet_loss`` + the tracker's terms) and its parts as floats, for logging. The tracker is
+    scored on every present object on every frame (its belief must be honest when unseen too)."""
+    total, parts = posenet_loss(single, batch, beta)
     present = batch["object_mask"].unsqueeze(1)
-    posenet_mask = present
-    extra = {}
-    if single.visibility_logit is not None:
-        visible = batch["visible"] & present
-        posenet_mask = visible
-        extra["posenet_visibility"] = _masked_mean(F.binary_cross_entropy_with_logits(
-            single.visibility_logit, visible.to(single.visibility_logit.dtype), reduction="none"), present)
-    parts = {}
-    total = torch.zeros((), device=batch["agent_pose"].device)
-    for name, estimate, mask, b in (("posenet", single, posenet_mask, beta), ("tracker", tracked, present, 0.0)):
-        terms = nll_terms(estimate, batch["agent_pose"], batch["object_positions"], mask, b)
-        for term, value in terms.items():
-            parts[f"{name}_{term}"] = float(value.detach())
-            total = total + value
-    for term, value in extra.items():
-        parts[term] = float(value.detach())
-        total = total + value
-    return total, parts
+    tracker = nll_terms(tracked, batch["agent_pose"], batch["object_positions"], present)
+    return total + _summed(tracker, "tracker", parts), parts
 
 
 def previous_actions(actions: torch.Tensor) -> torch.Tensor:

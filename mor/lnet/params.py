@@ -49,7 +49,11 @@ class TrainParams(BaseModel):
     learning_rate: float = Field(1e-3, gt=0)
     weight_decay: float = Field(1e-4, ge=0)
     grad_clip: float = Field(1.0, gt=0)
-    max_steps: int = Field(3000, ge=1)
+    max_steps: int = Field(3000, ge=1, description="steps on windows (after the pretraining)")
+    pretrain_steps: int = Field(0, ge=0, description="PoseNet steps on single frames drawn from the whole training "
+                                                     "split before the windows (our addition): many more frames per "
+                                                     "step for the encoder and the object head; 0: none")
+    pretrain_batch_size: int = Field(64, ge=1, description="frames per pretraining step")
     eval_every: int = Field(250, ge=1)
     validation_windows: int = Field(256, ge=1, description="fixed subset of validation windows per evaluation")
     patience: int = Field(4, ge=1, description="evaluations without improvement before stopping")

@@ -35,6 +35,21 @@ def test_training_resumes_where_it_stopped(tiny_dataset: tuple, tmp_path: Path) 
     assert _steps(tmp_path / LOG) == [1, 2, 3, 4, 5, 6]  # nothing redone, nothing skipped
 
 
+def test_pretraining_runs_first_resumes_and_leaves_the_window_steps_to_follow(tiny_dataset: tuple,
+                                                                               tmp_path: Path) -> None:
+    manifest, root, _ = tiny_dataset
+    version = manifest_version(read_manifest(manifest))
+    first = PARAMS.model_copy(update={"pretrain_steps": 2, "pretrain_batch_size": 3, "max_steps": 1, "eval_every": 1})
+    summary = train(CONFIG, first, root / "train", root / "validation", tmp_path, version, progress=False)
+    assert summary["pretrain_steps"] == 2 and summary["steps"] == 1 and summary["pretrain_seconds"] > 0
+    more = first.model_copy(update={"pretrain_steps": 3, "max_steps": 2})  # no pretraining once windows began
+    again = train(CONFIG, more, root / "train", root / "validation", tmp_path, version, progress=False)
+    assert again["pretrain_steps"] == 2 and again["steps"] == 2 and again["pretrain_seconds"] is None
+    with open(tmp_path / LOG) as stream:
+        rows = [(row["split"], int(row["step"])) for row in csv.DictReader(stream) if row["split"] != "validation"]
+    assert rows == [("pretrain", -1), ("pretrain", 0), ("train", 1), ("train", 2)]
+
+
 def test_foreign_checkpoints_are_refused_with_both_sides_named(tiny_dataset: tuple, tmp_path: Path) -> None:
     manifest, root, _ = tiny_dataset
     version = manifest_version(read_manifest(manifest))
