@@ -101,7 +101,9 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
            "is visible." if params["model"].get("visibility") else ""), "",
         f"- Dataset version: `{metrics['dataset_version']}`; test split: {before['episodes']} episodes, "
         f"{before['frames']} frames.",
-        f"- Training: {train_summary['steps']} steps on {train_summary['device']}"
+        "- Training: " + (f"{train_summary['pretrain_steps']} PoseNet pretraining steps on single frames, then "
+                          if train_summary.get("pretrain_steps") else "")
+        + f"{train_summary['steps']} steps on windows, on {train_summary['device']}"
         + (f" ({seconds / 60:.1f} min wall time, {train_summary.get('torch_threads')} torch thread(s))"
            if seconds else "")
         + f", best validation loss {train_summary['best_validation_loss']:.3f}, early stop: "

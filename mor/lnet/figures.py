@@ -324,8 +324,8 @@ def _running_mean(values: np.ndarray, window: int) -> np.ndarray:
 
 def learning_curve_figure(log_rows: Sequence[Mapping[str, Any]], title: str = "L-Net learning curve",
                           key: str = "loss") -> Figure:
-    """``key`` against step per split: train as a thin line (with its running mean when there are 100 rows or more),
-    validation as markers, any other split as markers too. Rows may hold strings (``csv.DictReader`` of the
+    """``key`` against step per split: train and pretrain (single frames, at negative steps) as thin lines (with
+    running means when there are 100 rows or more), validation as markers, any other split as markers too. Rows may hold strings (``csv.DictReader`` of the
     training's log.csv); rows without a finite ``key`` are skipped. Log y axis when every value is positive."""
     curves: dict[str, tuple[list[float], list[float]]] = {}
     for row in log_rows:
@@ -342,14 +342,16 @@ def learning_curve_figure(log_rows: Sequence[Mapping[str, Any]], title: str = "L
     figure = Figure(figsize=(6.4, 4.0), dpi=DPI, layout="constrained")
     ax = figure.add_subplot()
     order = sorted(curves, key=lambda s: (s != "train", s != "validation", s))
+    per_step = {"train": "tab:blue", "pretrain": "tab:green"}  # one row per optimizer step
     for split in order:
         steps, values = (np.asarray(v) for v in curves[split])
-        if split == "train":
+        if split in per_step:
             window = len(values) // 50 if len(values) >= 100 else 1
-            ax.plot(steps, values, linewidth=0.8, alpha=0.4 if window > 1 else 1.0, color="tab:blue", label="train")
+            colour = per_step[split]
+            ax.plot(steps, values, linewidth=0.8, alpha=0.4 if window > 1 else 1.0, color=colour, label=split)
             if window > 1:
-                ax.plot(steps[window - 1:], _running_mean(values, window), linewidth=1.8, color="tab:blue",
-                        label=f"train (running mean of {window})")
+                ax.plot(steps[window - 1:], _running_mean(values, window), linewidth=1.8, color=colour,
+                        label=f"{split} (running mean of {window})")
         else:
             colour = "tab:orange" if split == "validation" else None
             ax.plot(steps, values, marker="o", markersize=4, linewidth=0.8, color=colour, label=split)
