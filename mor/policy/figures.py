@@ -9,6 +9,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import EngFormatter  # noqa: E402
 
 from mor.atomic import atomic_output  # noqa: E402
 
@@ -27,6 +28,7 @@ def write_learning_curve(log_path: Path, png_path: Path, title: str) -> Path:
     right.set(xlabel="environment steps", ylabel="return (last 100 episodes)")
     for ax in (left, right):
         ax.grid(alpha=0.3)
+        ax.xaxis.set_major_formatter(EngFormatter(sep=""))  # 100k, 1M: long step counts do not run together
     figure.suptitle(title)
     figure.tight_layout()
     with atomic_output(png_path) as partial:
