@@ -197,7 +197,7 @@ def write_table_figure(spec: TableSpec, rows: list[dict[str, Any]], path: Path) 
     x = np.arange(len(METRIC_NAMES))
     for k, (label, means, errors, hatch) in enumerate(bars):
         ax.bar(x + (k - (len(bars) - 1) / 2) * width, means, width, yerr=errors, label=label, hatch=hatch,
-               capsize=2, alpha=0.85 if hatch is None else 0.45)
+               capsize=2, alpha=0.85 if hatch is None else 0.45, color=plt.get_cmap("tab20")(k % 20))  # 20 distinct
     ax.set_xticks(x, [METRIC_LABELS[m] for m in METRIC_NAMES])
     ax.set_ylim(0, 1.05)
     ax.set_title(f"Table {spec.number}: {spec.title}")
