@@ -46,7 +46,7 @@ def load_method(profile: Profile, method: MethodSpec, zero_shot: bool = False
     """A learned method's committed policies (checked against what they were trained on) and its tracker factory;
     zero_shot: the main workspace's policies through this workspace's L-Net (``policy_root``)."""
     sim, root = profile.sim, policy_root(profile, zero_shot)
-    if method.decision == "object_order":
+    if method.is_baseline:
         policies = TrainedPolicies.load_baseline(root, method.variant, sim.n_objects, sim.arena,
                                                  sim.image_size, profile.policy.skills_deterministic)
         return policies, lambda n: RenderingTruthTracker()
@@ -64,7 +64,7 @@ def load_method(profile: Profile, method: MethodSpec, zero_shot: bool = False
 
 def policy_folders(method: MethodSpec, root: Path) -> dict[str, Path]:
     """The committed folder of each policy a learned method plays (a baseline's pick is ``PICK_FROM``'s)."""
-    if method.decision == "object_order":
+    if method.is_baseline:
         from mor.policy.baselines import PICK_FROM  # noqa: PLC0415 - torch only here
 
         return {"pick": root / PICK_FROM / "pick", "drop": root / method.variant / "drop"}
@@ -91,7 +91,6 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
     method = method_spec(method_name)
     sim, protocol = profile.sim, profile.evaluate
     policies, tracker_factory, train_steps, policy_arena = None, None, None, sim.arena
-    baseline = method.decision == "object_order"
     if method.variant is not None:
         policies, tracker_factory = load_method(profile, method, zero_shot)
         folders = policy_folders(method, policy_root(profile, zero_shot))
@@ -107,7 +106,7 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
     started = time.perf_counter()
     records = run_protocol(method, sim, protocol.seeds, protocol.episodes, paths.EVAL / f"{name}.jsonl",
                            policies, tracker_factory, protocol.n_envs, progress, protocol.horizon, run_jobs)
-    row = {"method": method.name, "encoder": profile.policy.baseline.encoder if baseline else None,
+    row = {"method": method.name, "encoder": profile.policy.baseline.encoder if method.is_baseline else None,
            "arena": arena_label(sim.arena), "policy_arena": arena_label(policy_arena), "n_objects": sim.n_objects,
            "seeds": protocol.seeds, "episodes_per_seed": protocol.episodes, "train_steps": train_steps,
            "metrics": metric_summaries(records, protocol.bootstrap_resamples), "profile": profile_name,

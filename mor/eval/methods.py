@@ -26,6 +26,11 @@ class MethodSpec:
     variant: Variant | BaselineVariant | None  # None for the scripted policies
     decision: Decision
 
+    @property
+    def is_baseline(self) -> bool:
+        """An end-to-end pixel baseline (``mor.policy.baselines``): its skills chained in object order."""
+        return self.decision == "object_order"
+
 
 METHODS: dict[str, MethodSpec] = {spec.name: spec for spec in (
     MethodSpec("gt_pose", "gt_pose", "learned"),

@@ -54,14 +54,14 @@ def decider(method: MethodSpec, policies: TrainedPolicies, arena: Arena) -> Deci
 
 def method_inputs(method: MethodSpec) -> Encode:
     """What a learned method's skills read: a baseline's pixels and goal, or the pose layout of its variant."""
-    if method.decision == "object_order":
+    if method.is_baseline:
         return baseline_inputs(method.variant)
     return pose_inputs(has_uncertainty(method.variant))
 
 
 def sim_of(method: MethodSpec, sim: SimConfig) -> SimConfig:
     """The world the method plays in: the landmark baseline's shows its drop targets."""
-    return baseline_sim(method.variant, sim) if method.decision == "object_order" else sim
+    return baseline_sim(method.variant, sim) if method.is_baseline else sim
 
 
 def _play_scripted(method: MethodSpec, task: str, sim: SimConfig, keys: list[tuple[Any, int]],
