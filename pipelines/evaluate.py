@@ -11,22 +11,23 @@ from pathlib import Path
 from typing import Any
 
 from mor.config import Profile
+from mor.data.parallel import unordered_map
+from mor.errors import ConfigError
 from mor.eval.card import write_results_card
 from mor.eval.methods import METHODS, MethodSpec, TrainedPolicies, method_spec
 from mor.eval.policy_card import write_policy_card
-from mor.data.parallel import unordered_map
 from mor.eval.protocol import EpisodeKey, decider, metric_summaries, play_records, run_protocol
-from mor.eval.video import write_policy_video
 from mor.eval.results import ROW_KEYS, arena_label, merge_rows
+from mor.eval.tables import localisation_headline
+from mor.eval.video import write_policy_video
 from mor.policy.names import TASKS, VARIANTS
-from mor.errors import ConfigError
 from mor.policy.observations import (BatchTracker, GroundTruthBatchTracker, RenderingTruthTracker, SingleTracker,
                                      has_uncertainty)
+from mor.policy.signature import read_signature
 from mor.sim.arena import Arena
-from pipelines import paths
+from pipelines import paths, settings
 from pipelines.compute import update_compute
 from pipelines.io import write_json
-from mor.policy.signature import read_signature
 from pipelines.train_policy import lnet_runner
 
 
@@ -63,13 +64,8 @@ def load_method(profile: Profile, method: MethodSpec, zero_shot: bool = False
 
 
 def policy_folders(method: MethodSpec, root: Path) -> dict[str, Path]:
-    """The committed folder of each policy a learned method plays (a baseline's pick is ``PICK_FROM``'s)."""
-    if method.is_baseline:
-        from mor.policy.baselines import PICK_FROM  # noqa: PLC0415 - torch only here
-
-        return {"pick": root / PICK_FROM / "pick", "drop": root / method.variant / "drop"}
-    tasks = [task for task in TASKS if task != "decision" or method.decision == "learned"]
-    return {task: root / method.variant / task for task in tasks}
+    """The committed folder of each policy a learned method plays (``MethodSpec.skill_owners``)."""
+    return {task: root / owner / task for task, owner in method.skill_owners().items()}
 
 
 def evaluate_job(job: tuple[Path, Profile, str, bool, list[EpisodeKey]]) -> list[dict[str, Any]]:
@@ -129,20 +125,40 @@ def policy_video(profile: Profile, method_name: str, seed: int, out: Path) -> di
 
 def collect_results(profile_name: str) -> Path:
     """Merge every row in ``cards/results/rows/`` (and each setting's, ``settings/*/cards/results/rows/``) of this
-    profile into ``cards/results/results.json`` and render the tables into ``cards/results/README.md``."""
-    row_files = [*(paths.RESULTS_CARD / "rows").glob("*.json"),
-                 *paths.SETTINGS.glob(f"*/{paths.RESULTS_CARD}/rows/*.json")]  # the settings' rows: Tables 3 and 4
-    rows = [json.loads(p.read_text()) for p in sorted(row_files)]
+    profile into ``cards/results/results.json`` and render the tables into ``cards/results/README.md``.
+
+    Each row gets the ``workspace`` it was evaluated in ("." or "settings/NAME"); ``localisation`` maps each
+    workspace to the headline errors of the L-Net its rows observed through (for the card's shortfall notes)."""
+    workspaces = [Path("."), *sorted(folder for folder in paths.SETTINGS.glob("*")
+                                     if (folder / paths.RESULTS_CARD / "rows").is_dir())]  # Tables 3 and 4
+    rows = [{**json.loads(p.read_text()), "workspace": workspace.as_posix()} for workspace in workspaces
+            for p in sorted((workspace / paths.RESULTS_CARD / "rows").glob("*.json"))]
     path = paths.RESULTS_CARD / "results.json"
     existing = json.loads(path.read_text()) if path.is_file() else {"profile": profile_name, "rows": []}
     if existing.get("profile") != profile_name:
         existing = {"profile": profile_name, "rows": []}
     merged = merge_rows(existing["rows"], [r for r in rows if r.get("profile") == profile_name])
     results = {"profile": profile_name, "row_keys": list(ROW_KEYS), "rows": merged,
+               "localisation": localisation(workspaces, profile_name),
                "compute": update_compute(paths.RESULTS_CARD / "compute.json", profile_name)}
     write_json(path, results)
     write_results_card(results, paths.RESULTS_CARD)
     return path
+
+
+def localisation(workspaces: list[Path], profile_name: str) -> dict[str, dict[str, Any]]:
+    """workspace -> ``localisation_headline`` of the L-Net its L-Net rows observed through (the main one where the
+    setting says ``lnet_from_main``) and that metrics file's path; workspaces whose L-Net has no metrics are left
+    out."""
+    found = {}
+    for workspace in workspaces:
+        setting = settings.setting_profile(workspace.name, profile_name).setting if workspace != Path(".") else None
+        own = setting is not None and not setting.lnet_from_main
+        metrics = (workspace / paths.LNET_CARD if own else paths.LNET_CARD) / "metrics.json"
+        if metrics.is_file():
+            found[workspace.as_posix()] = {**localisation_headline(json.loads(metrics.read_text())),
+                                           "file": metrics.as_posix()}
+    return found
 
 
 def write_policy_cards(profile: Profile, profile_name: str, video_seed: int = 0) -> list[Path]:

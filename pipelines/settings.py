@@ -15,7 +15,7 @@ from pathlib import Path
 import yaml
 
 from mor.atomic import atomic_output
-from mor.config import DEFAULT_PARAMS, setting_document
+from mor.config import DEFAULT_PARAMS, Profile, setting_document, validated
 from pipelines import paths
 
 HEADER = "# Written by `mor --setting {name}` from ../../params.yaml (settings.{name}); edit that file, not this.\n"
@@ -37,3 +37,10 @@ def enter(name: str, params: Path = DEFAULT_PARAMS) -> Path:
     previous = Path.cwd()
     os.chdir(folder)
     return previous
+
+
+def setting_profile(name: str, profile_name: str, params: Path = DEFAULT_PARAMS) -> Profile:
+    """Profile ``profile_name`` as setting ``name``'s workspace sees it (read from the root's ``params``)."""
+    document = setting_document(params, name)
+    return validated(Profile, f"{params}: settings.{name} (profiles.{profile_name})",
+                     **(document["profiles"][profile_name] or {}))

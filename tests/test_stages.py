@@ -115,6 +115,9 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     assert settings == {("rect", "rect", 3), ("polygon", "rect", 3), ("polygon", "polygon", 3), ("rect", "rect", 2)}
     readme = (workspace / "cards/results/README.md").read_text()
     assert "| Ours (lnet), policies trained in rect: zero-shot |" in readme and "| 2 objects: Ours (lnet) |" in readme
+    localisation = json.loads((workspace / "cards/results/results.json").read_text())["localisation"]
+    assert localisation["settings/polygon"]["file"] == "settings/polygon/cards/lnet/metrics.json"  # its own L-Net
+    assert localisation["settings/objects_2"]["file"] == "cards/lnet/metrics.json"  # lnet_from_main
     missing = CliRunner().invoke(app, ["eval", "tables", "--table", "3"])
     assert missing.exit_code == 2 and "mor --setting polygon eval run --method baseline_delta_pose" in missing.output
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from mor.eval.tables import TABLES, budget_line, table_markdown, write_table_figure
+from mor.eval.tables import TABLES, budget_line, shortfalls, table_markdown, write_table_figure
 
 
 def write_results_card(results: dict[str, Any], folder: Path) -> Path:
@@ -26,6 +26,7 @@ def write_results_card(results: dict[str, Any], folder: Path) -> Path:
         figure = write_table_figure(spec, rows, folder / f"table{number}.png")
         if figure is not None:
             parts += ["", f"![Table {number}]({figure.name})"]
+    parts += shortfall_section(rows, results.get("localisation", {}))
     parts += compute_section(results.get("compute"))
     with atomic_output(folder / "README.md") as partial:
         partial.write_text("\n".join(parts) + "\n")
@@ -46,3 +47,13 @@ def compute_section(compute: dict[str, Any] | None) -> list[str]:
              "| stage | minutes |", "|---|---|"]
     lines += [f"| {stage} | {seconds / 60:.1f} |" for stage, seconds in compute["stages"].items()]
     return lines
+
+
+def shortfall_section(rows: list[dict[str, Any]], localisation: dict[str, dict[str, Any]]) -> list[str]:
+    """The card's "Where ours falls short" section: every ✗ of Tables 1-4 with its learning curves and L-Net error."""
+    lines = [line for spec in TABLES.values() for line in shortfalls(spec, rows, localisation)]
+    if not lines:
+        return []
+    return ["", "## Where ours falls short of the paper", "",
+            "Every row with a ✗ above, the metrics it misses by, the learning curves of the policies it played, and "
+            "the localisation error of the L-Net it observed through (in its own setting).", "", *lines]

@@ -14,7 +14,7 @@ from typing import Literal
 
 from mor.errors import ConfigError
 from mor.policy.hierarchy import POLICY_FILE, Skill
-from mor.policy.names import BASELINE_VARIANTS, TASKS, BaselineVariant, Task, Variant
+from mor.policy.names import BASELINE_VARIANTS, PICK_FROM, TASKS, VARIANTS, BaselineVariant, Task, Variant
 from mor.policy.signature import ZERO_SHOT_FIELDS, PolicySignature, check_signature
 
 Decision = Literal["learned", "nearest_rule", "object_order", "scripted"]
@@ -30,6 +30,20 @@ class MethodSpec:
     def is_baseline(self) -> bool:
         """An end-to-end pixel baseline (``mor.policy.baselines``): its skills chained in object order."""
         return self.decision == "object_order"
+
+    @property
+    def uses_lnet(self) -> bool:
+        """Observes the world through the L-Net's estimates (every learned variant but gt_pose)."""
+        return self.variant in VARIANTS and self.variant != "gt_pose"
+
+    def skill_owners(self) -> dict[Task, Variant | BaselineVariant]:
+        """Whose trained policy each task this method plays is: the variant's own (the decision only where it is
+        learned), a baseline's Pick ``PICK_FROM``'s; empty for the scripted policies."""
+        if self.variant is None:
+            return {}
+        if self.is_baseline:
+            return {"pick": PICK_FROM, "drop": self.variant}
+        return {task: self.variant for task in TASKS if task != "decision" or self.decision == "learned"}
 
 
 METHODS: dict[str, MethodSpec] = {spec.name: spec for spec in (
@@ -81,11 +95,10 @@ class TrainedPolicies:
     @classmethod
     def load_baseline(cls, root: Path, variant: BaselineVariant, n_objects: int, arena: str, image_size: int,
                       deterministic: bool = True) -> TrainedPolicies:
-        """A baseline's skills: ``PICK_FROM``'s pick and its own drop, each checked against its ``meta.json``."""
-        from mor.policy.baselines import PICK_FROM  # noqa: PLC0415 - torch only here
-
+        """A baseline's skills (``MethodSpec.skill_owners``: ``PICK_FROM``'s pick and its own drop), each checked
+        against its ``meta.json``."""
         skills = {}
-        for task, owner in (("pick", PICK_FROM), ("drop", variant)):
+        for task, owner in METHODS[variant].skill_owners().items():
             folder = policy_dir(root, owner, task)
             check_signature(folder / "meta.json",
                             PolicySignature.of_baseline(task, owner, n_objects, arena, image_size))

@@ -7,6 +7,7 @@ each missing row with the command that produces it (``require_complete`` turns t
 
 from __future__ import annotations
 
+import posixpath
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -15,6 +16,7 @@ import numpy as np
 
 from mor.errors import ConfigError
 from mor.eval import paper
+from mor.eval.methods import METHODS
 from mor.eval.paper import LOWER_IS_BETTER, METRIC_NAMES
 
 METRIC_LABELS = {"pick_success": "Pick", "drop_success": "Drop", "rearrange_success": "Rearr. success",
@@ -143,11 +145,15 @@ def _paper_cell(value: tuple[float, float] | None) -> str:
     return "–" if value is None else f"{value[0]:.3f} ± {value[1]:.3f}"
 
 
+def _better(ours: dict[str, Any], theirs: tuple[float, float], metric: str) -> bool:
+    """Our mean better than the paper's (%E: lower is better)."""
+    return ours["mean"] < theirs[0] if metric in LOWER_IS_BETTER else ours["mean"] > theirs[0]
+
+
 def _beats(ours: dict[str, Any] | None, theirs: tuple[float, float] | None, metric: str) -> str:
     if ours is None or theirs is None:
         return ""
-    better = ours["mean"] < theirs[0] if metric in LOWER_IS_BETTER else ours["mean"] > theirs[0]
-    return " ✓" if better else " ✗"
+    return " ✓" if _better(ours, theirs, metric) else " ✗"
 
 
 def table_markdown(spec: TableSpec, rows: list[dict[str, Any]]) -> str:
@@ -212,12 +218,72 @@ def write_table_figure(spec: TableSpec, rows: list[dict[str, Any]], path: Path) 
 
 def budget_line(rows: list[dict[str, Any]], spec: TableSpec) -> str:
     """What the table's rows were trained and evaluated with, from the rows themselves."""
-    parts = []
-    for line in spec.rows:
-        row = find_row(rows, line.match)
+    parts, present = [], [(line, find_row(rows, line.match)) for line in spec.rows]
+    repeated = [row["method"] for _, row in present if row is not None]
+    for line, row in present:
         if row is not None and row.get("train_steps"):
             steps = ", ".join(f"{k} {v:,}" for k, v in row["train_steps"].items())
-            parts.append(f"{row['method']}: {steps}")
+            parts.append(f"{line.label if repeated.count(row['method']) > 1 else row['method']}: {steps}")
     evaluated = {(tuple(r["seeds"]), r["episodes_per_seed"]) for r in rows}
     protocol = "; ".join(f"{len(s)} seeds × {e} episodes per task" for s, e in sorted(evaluated))
     return f"Evaluation: {protocol}. Training steps (decisions for the decision policy): " + ("; ".join(parts) or "–")
+
+
+#: what the shortfall notes quote from an L-Net's metrics.json (``after_calibration``, medians on the test split)
+LOCALISATION_KEYS = {"agent_m": ("agent_position_error_m", "agent"), "heading_deg": ("heading_error_deg", "heading"),
+                     "objects_visible_m": (("object_position_error_m", "visible"), "objects in view"),
+                     "objects_seen_m": (("object_position_error_m", "seen"), "objects seen earlier")}
+
+
+def localisation_headline(metrics: dict[str, Any]) -> dict[str, float]:
+    """The medians ``LOCALISATION_KEYS`` names from an L-Net's metrics.json content."""
+    after = metrics["after_calibration"]
+    headline = {}
+    for key, (path, _) in LOCALISATION_KEYS.items():
+        node = after
+        for part in (path,) if isinstance(path, str) else path:
+            node = node[part]
+        headline[key] = float(node["median"])
+    return headline
+
+
+def _learning_curves(row: dict[str, Any]) -> str:
+    """Links (from ``cards/results/``) to the learning curves of the policies ``row``'s method played and trained."""
+    method = METHODS[row["method"]]
+    zero_shot = row["arena"] != row["policy_arena"]  # mor eval run --zero-shot: the main workspace's policies
+    workspace = "." if zero_shot else row.get("workspace", ".")
+    trained = row.get("train_steps") or {}
+    folder = posixpath.normpath(f"../../{workspace}/cards/policy")
+    links = [f"[{task}]({folder}/{owner}/{task}/learning_curve.png)"
+             for task, owner in method.skill_owners().items() if trained.get(task)]
+    return ", ".join(links)
+
+
+def _localisation(row: dict[str, Any], localisation: dict[str, dict[str, Any]]) -> str:
+    """The L-Net error the row's method played with (its workspace's L-Net), or "" for a method without one."""
+    found = localisation.get(row.get("workspace", "."))
+    if not METHODS[row["method"]].uses_lnet or found is None:
+        return ""
+    medians = ", ".join(f"{label} {found[key]:.2f}°" if key == "heading_deg" else f"{label} {found[key]:.3f} m"
+                        for key, (_, label) in LOCALISATION_KEYS.items())
+    return f"; its L-Net (`{found['file']}`, test split after calibration, medians): {medians}"
+
+
+def shortfalls(spec: TableSpec, rows: list[dict[str, Any]], localisation: dict[str, dict[str, Any]]) -> list[str]:
+    """One line per row of ``spec`` that is worse than the paper's on some metric: those metrics, and the evidence
+    of why (the learning curves of its policies; the localisation error of its L-Net in that setting).
+
+    localisation: workspace ("." or "settings/NAME") -> ``localisation_headline`` plus its ``file``."""
+    lines = []
+    for line in spec.rows:
+        row = find_row(rows, line.match)
+        if row is None or line.paper is None:
+            continue
+        worse = [f"{METRIC_LABELS[m]} {row['metrics'][m]['mean']:.3f} (paper {theirs[0]:.3f})"
+                 for m, theirs in zip(METRIC_NAMES, line.paper, strict=True)
+                 if theirs is not None and m in row["metrics"] and not _better(row["metrics"][m], theirs, m)]
+        if worse:
+            curves = _learning_curves(row)
+            lines.append(f"- Table {spec.number}, {row_label(line, row)}: " + ", ".join(worse)
+                         + f". Learning curves: {curves or '–'}{_localisation(row, localisation)}.")
+    return lines

@@ -34,7 +34,7 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, NatureC
 
 from mor.lnet.model import build_encoder
 
-from mor.policy.names import BaselineVariant, Task
+from mor.policy.names import PICK_FROM, BaselineVariant, Task
 from mor.sim.catalog import N_CLASSES
 from mor.sim.geometry import bearing
 from mor.sim.tasks import DropEnv, PickEnv
@@ -43,8 +43,6 @@ BaselineInput = Literal["img", "delta_pose", "landmark"]
 BaselineEncoder = Literal["nature_cnn", "compact", "resnet18", "resnet50"]
 BASELINE_INPUTS: dict[BaselineVariant, BaselineInput] = {
     "baseline_img": "img", "baseline_delta_pose": "delta_pose", "baseline_landmark": "landmark"}
-#: the variant whose Pick policy each baseline uses (Pick's inputs are the same in all three)
-PICK_FROM: BaselineVariant = "baseline_img"
 
 
 def baseline_tasks(variant: BaselineVariant) -> tuple[Task, ...]:

@@ -13,3 +13,6 @@ VARIANTS: tuple[Variant, ...] = ("gt_pose", "lnet", "lnet_no_uncertainty")
 #: the paper's end-to-end CNN baselines (mor.policy.baselines): +Img, +ΔPose, +Landmark
 BaselineVariant = Literal["baseline_img", "baseline_delta_pose", "baseline_landmark"]
 BASELINE_VARIANTS: tuple[BaselineVariant, ...] = ("baseline_img", "baseline_delta_pose", "baseline_landmark")
+
+#: the variant whose Pick policy each baseline uses (Pick's inputs are the same in all three)
+PICK_FROM: BaselineVariant = "baseline_img"

@@ -45,3 +45,33 @@ def test_the_policy_card_compares_with_and_without_uncertainty_by_their_interval
     close = uncertainty_comparison([_row("lnet", 0.5), _row("lnet_no_uncertainty", 0.49)])
     assert all(line.endswith("| no difference shown |") for line in close)
     assert uncertainty_comparison([_row("lnet", 0.5)]) == []
+
+
+def test_each_row_short_of_the_paper_is_named_with_its_learning_curves_and_its_lnet_error() -> None:
+    from mor.eval.tables import shortfalls
+
+    localisation = {"settings/polygon": {"agent_m": 0.1, "heading_deg": 2.0, "objects_visible_m": 0.5,
+                                         "objects_seen_m": 0.3, "file": "settings/polygon/cards/lnet/metrics.json"}}
+    zero_shot = {**_row("lnet", 0.2), "arena": "polygon", "workspace": "settings/polygon",
+                 "train_steps": {"pick": 10, "drop": 10, "decision": 0}}
+    fine_tuned = {**zero_shot, "policy_arena": "polygon"}
+    good = _row("baseline_delta_pose", 0.9)["metrics"] | {"energy_remaining": _row("lnet", 0.1)["metrics"]["pick_success"]}
+    baseline = {**_row("baseline_delta_pose", 0.9), "arena": "polygon", "policy_arena": "polygon", "metrics": good,
+                "encoder": "nature_cnn", "workspace": "settings/polygon", "train_steps": {"pick": 5, "drop": 5}}
+    lines = shortfalls(TABLES[3], [zero_shot, fine_tuned, baseline], localisation)
+    assert len(lines) == 2  # the baseline is better than the paper's on every metric: not listed
+    assert lines[0].startswith("- Table 3, Ours (lnet), policies trained in rect: zero-shot: Pick 0.200 (paper 0.538)")
+    assert "[pick](../../cards/policy/lnet/pick/learning_curve.png)" in lines[0]  # played the main workspace's
+    assert "[pick](../../settings/polygon/cards/policy/lnet/pick/learning_curve.png)" in lines[1]
+    assert "decision" not in lines[1]  # not trained: no learning curve
+    assert "`settings/polygon/cards/lnet/metrics.json`" in lines[1] and "objects in view 0.500 m" in lines[1]
+    assert shortfalls(TABLES[3], [{**fine_tuned, "metrics": baseline["metrics"]}], localisation) == []
+
+
+def test_a_baseline_plays_the_img_baselines_pick_and_its_own_drop() -> None:
+    from mor.eval.methods import METHODS
+
+    assert METHODS["baseline_landmark"].skill_owners() == {"pick": "baseline_img", "drop": "baseline_landmark"}
+    assert METHODS["lnet_nearest_rule"].skill_owners() == {"pick": "lnet", "drop": "lnet"}
+    assert set(METHODS["lnet"].skill_owners()) == {"pick", "drop", "decision"} and METHODS["oracle"].skill_owners() == {}
+    assert METHODS["lnet_no_uncertainty"].uses_lnet and not METHODS["gt_pose"].uses_lnet
