@@ -15,6 +15,7 @@ from mor.atomic import atomic_output
 _ERROR_ROWS = (("agent position (m)", ("agent_position_error_m",), 3),
                ("heading (deg)", ("heading_error_deg",), 2),
                ("objects in view now (m)", ("object_position_error_m", "visible"), 3),
+               ("objects in view within PICK's reach, ≤ 1 m (m)", ("object_position_error_m", "visible_in_reach"), 3),
                ("objects seen earlier (m)", ("object_position_error_m", "seen"), 3),
                ("objects not yet seen (m)", ("object_position_error_m", "unseen"), 3),
                ("all objects (m)", ("object_position_error_m", "all"), 3))
@@ -38,6 +39,19 @@ def error_table(block: dict[str, Any]) -> list[str]:
         summary = _get(block, path)
         rows.append(f"| {name} | {_number(summary.get('median'), digits)} | {_number(summary.get('p90'), digits)} | "
                     f"{summary.get('count', '–')} |")
+    return rows
+
+
+def distance_table(columns: dict[str, dict[str, Any]]) -> list[str]:
+    """Median error of the objects in view, per bin of their distance from the agent, one column per block."""
+    bins = next(iter(columns.values()))["object_error_in_view_by_distance"]["bin_start"]
+    edges = [f"{low:g}–{high:g} m" for low, high in zip(bins[:-1], bins[1:], strict=True)] + [f"≥ {bins[-1]:g} m"]
+    rows = [f"| distance | {' | '.join(f'{name}: median (m) / frames' for name in columns)} |",
+            "| --- |" + " --- |" * len(columns)]
+    for k, edge in enumerate(edges):
+        cells = [f"{_number(b['object_error_in_view_by_distance']['median_m'][k], 3)} / "
+                 f"{b['object_error_in_view_by_distance']['count'][k]}" for b in columns.values()]
+        rows.append(f"| {edge} | " + " | ".join(cells) + " |")
     return rows
 
 
@@ -115,6 +129,11 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
         "'In view now': visible by the simulator's rule on this frame; 'seen earlier': visible or held at or before "
         "this frame; 'not yet seen': neither, so only the prior can answer.", "",
     ]
+    by_distance = {"test": after} | ({"oracle-driven": oracle["after_calibration"]} if oracle else {})
+    if all("object_error_in_view_by_distance" in block for block in by_distance.values()):
+        lines += ["## Objects in view: error by distance", "",
+                  "An object far away is a few pixels of the frame; PICK reaches 1 m.", "",
+                  *distance_table(by_distance), ""]
     if oracle:
         lines += [f"## Errors on oracle-driven episodes ({oracle['after_calibration']['episodes']} Rearrange episodes, "
                   f"{oracle['after_calibration']['frames']} frames, tracked live by the streaming step)", "",

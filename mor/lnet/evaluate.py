@@ -29,7 +29,7 @@ from mor.lnet.train import run_model, to_device
 from mor.sim.config import SimConfig
 from mor.sim.geometry import wrap_angle
 from mor.sim.rollout import episode_seed, make_policy
-from mor.sim.rules import visible
+from mor.sim.rules import PICK_RANGE, visible
 
 LIVE_ENV = "MOR/Rearrange-v0"
 
@@ -247,19 +247,41 @@ def _summary(values: np.ndarray) -> dict[str, float]:
 
 #: Bins of "frames since the object was last visible or held": [low, high) edges; the last is open.
 SINCE_SEEN_BINS = (0, 1, 2, 4, 8, 16, 32, 64, 128)
+#: Bins of the distance (m) from the agent to an object in view: [low, high) edges; the last is open.
+DISTANCE_BINS = (0.0, 1.0, 2.0, 3.0, 4.0, 6.0)
+
+
+def _median_by_bins(error: np.ndarray, value: np.ndarray, rows: np.ndarray, bins: tuple[float, ...]
+                    ) -> dict[str, list]:
+    """Median of ``error`` where ``rows``, per [low, high) bin of ``value`` (the last bin open); (N, K) each."""
+    edges = [*bins, np.inf]
+    masks = [rows & (value >= low) & (value < high) for low, high in zip(edges[:-1], edges[1:], strict=True)]
+    return {"bin_start": list(bins), "median_m": [float(np.median(error[m])) if m.any() else None for m in masks],
+            "count": [int(m.sum()) for m in masks]}
+
+
+def _object_error(p: Predictions) -> np.ndarray:
+    """(N, K) distance (m) between each object's estimated and true position."""
+    return np.linalg.norm(p.object_truth - p.object_mean, axis=-1)
+
+
+def _object_distance(p: Predictions) -> np.ndarray:
+    """(N, K) true distance (m) from the agent's centre to each object."""
+    return np.linalg.norm(p.object_truth - p.agent_pose[:, None, :2], axis=-1)
 
 
 def error_by_steps_since_seen(predictions: Predictions) -> dict[str, list]:
     """Median object position error (m) per bin of frames since the object was last visible or held
     (``SINCE_SEEN_BINS``); objects not yet seen are left out."""
     p = predictions
-    error = np.linalg.norm(p.object_truth - p.object_mean, axis=-1)
-    since = np.where(p.present, p.since_seen, -1)
-    edges = [*SINCE_SEEN_BINS, np.inf]
-    rows = [(since >= low) & (since < high) for low, high in zip(edges[:-1], edges[1:], strict=True)]
-    return {"bin_start": list(SINCE_SEEN_BINS), "median_m": [float(np.median(error[r])) if r.any() else None
-                                                             for r in rows],
-            "count": [int(r.sum()) for r in rows]}
+    return _median_by_bins(_object_error(p), p.since_seen, p.present & p.seen, SINCE_SEEN_BINS)
+
+
+def error_by_distance_in_view(predictions: Predictions) -> dict[str, list]:
+    """Median position error (m) of the objects in view now, per bin of their true distance from the agent
+    (``DISTANCE_BINS``): a far object is a few pixels of a 64 px frame."""
+    p = predictions
+    return _median_by_bins(_object_error(p), _object_distance(p), p.present & p.visible, DISTANCE_BINS)
 
 
 def metrics(predictions: Predictions) -> dict[str, Any]:
@@ -271,9 +293,10 @@ def metrics(predictions: Predictions) -> dict[str, Any]:
     heading_error = np.abs(wrap_angle(p.agent_pose[:, 2] - p.heading))
     heading_mass = heading_central_mass(heading_error, p.kappa)
     groups = {"seen": p.present & p.seen, "all": p.present, "visible": p.present & p.visible,
-              "unseen": p.present & ~p.seen}  # seen: at or before this frame; visible: now; unseen: not yet
+              "unseen": p.present & ~p.seen,  # seen: at or before this frame; visible: now; unseen: not yet
+              "visible_in_reach": p.present & p.visible & (_object_distance(p) <= PICK_RANGE)}  # what PICK needs
     seen = groups["seen"]
-    object_error = np.linalg.norm(p.object_truth - p.object_mean, axis=-1)
+    object_error = _object_error(p)
     nll = {
         "agent_position": float(gaussian_nll(as_t(p.agent_pose[:, :2]), as_t(p.agent_mean), as_t(p.agent_tril)).mean()),
         "heading": float(von_mises_nll(as_t(p.agent_pose[:, 2]), as_t(p.heading), as_t(p.kappa)).mean()),
@@ -303,6 +326,7 @@ def metrics(predictions: Predictions) -> dict[str, Any]:
         "heading_error_deg": _summary(np.rad2deg(heading_error)),
         "object_position_error_m": {name: _summary(object_error[rows]) for name, rows in groups.items()},
         "object_error_by_steps_since_seen": error_by_steps_since_seen(p),
+        "object_error_in_view_by_distance": error_by_distance_in_view(p),
         "coverage": coverage,
         "reliability": reliability,
     }

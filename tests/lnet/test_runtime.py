@@ -177,6 +177,21 @@ def test_steps_since_seen_counts_from_the_last_sighting_or_hold() -> None:
     assert steps_since_seen(visible, held).tolist() == [[-1, -1], [0, -1], [1, -1], [2, 0], [3, 1]]
 
 
+def test_error_of_objects_in_view_is_binned_by_their_distance_from_the_agent() -> None:
+    from mor.lnet.evaluate import error_by_distance_in_view, episode_predictions  # noqa: PLC0415
+
+    truth = np.array([[[0.5, 0.0], [2.5, 0.0]], [[0.5, 0.0], [6.5, 0.0]]])  # (T=2, K=2) m; the agent at the origin
+    estimate = {"agent_mean": np.zeros((2, 2)), "agent_tril": np.tile(np.eye(2), (2, 1, 1)), "heading": np.zeros(2),
+                "kappa": np.ones(2), "object_mean": truth + [[[0.1, 0.0], [0.0, 0.4]], [[0.3, 0.0], [2.0, 0.0]]],
+                "object_tril": np.tile(np.eye(2), (2, 2, 1, 1))}
+    visible = np.array([[True, True], [True, False]])
+    p = episode_predictions(estimate, np.zeros((2, 3)), truth, np.array([-1, -1]), visible, np.ones(2, bool), 0)
+    binned = error_by_distance_in_view(p)
+    assert binned["count"] == [2, 0, 1, 0, 0, 0]  # the object at 6.5 m is not in view on frame 1
+    assert binned["median_m"][0] == pytest.approx(0.2) and binned["median_m"][2] == pytest.approx(0.4)
+    assert binned["median_m"][1] is None
+
+
 def test_story_picks_an_episode_with_a_pick_then_a_drop() -> None:
     from mor.lnet.evaluate import story  # noqa: PLC0415
 
