@@ -232,6 +232,8 @@ def budget_line(rows: list[dict[str, Any]], spec: TableSpec) -> str:
 #: what the shortfall notes quote from an L-Net's metrics.json (``after_calibration``, medians on the test split)
 LOCALISATION_KEYS = {"agent_m": ("agent_position_error_m", "agent"), "heading_deg": ("heading_error_deg", "heading"),
                      "objects_visible_m": (("object_position_error_m", "visible"), "objects in view"),
+                     "objects_in_reach_m": (("object_position_error_m", "visible_in_reach"),
+                                            "objects in view within PICK's 1 m reach"),
                      "objects_seen_m": (("object_position_error_m", "seen"), "objects seen earlier")}
 
 

@@ -51,7 +51,7 @@ def test_each_row_short_of_the_paper_is_named_with_its_learning_curves_and_its_l
     from mor.eval.tables import shortfalls
 
     localisation = {"settings/polygon": {"agent_m": 0.1, "heading_deg": 2.0, "objects_visible_m": 0.5,
-                                         "objects_seen_m": 0.3, "file": "settings/polygon/cards/lnet/metrics.json"}}
+                                         "objects_in_reach_m": 0.2, "objects_seen_m": 0.3, "file": "settings/polygon/cards/lnet/metrics.json"}}
     zero_shot = {**_row("lnet", 0.2), "arena": "polygon", "workspace": "settings/polygon",
                  "train_steps": {"pick": 10, "drop": 10, "decision": 0}}
     fine_tuned = {**zero_shot, "policy_arena": "polygon"}
