@@ -162,9 +162,10 @@ def localisation(workspaces: list[Path], profile_name: str) -> dict[str, dict[st
 
 
 def write_policy_cards(profile: Profile, profile_name: str, video_seed: int = 0) -> list[Path]:
-    """``cards/policy/<variant>/README.md`` and ``episode.mp4`` for every variant with trained policies."""
-    results_path = paths.RESULTS_CARD / "results.json"
-    rows = json.loads(results_path.read_text())["rows"] if results_path.is_file() else []
+    """``cards/policy/<variant>/README.md`` and ``episode.mp4`` for every variant with trained policies; each card
+    shows this workspace's rows that played those policies (a zero-shot row played the main workspace's)."""
+    rows = [row for row in (json.loads(p.read_text()) for p in sorted((paths.RESULTS_CARD / "rows").glob("*.json")))
+            if row.get("profile") == profile_name and row["arena"] == row["policy_arena"]]
     written = []
     for variant in VARIANTS:
         folder = paths.POLICY_CARD / variant

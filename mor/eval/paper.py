@@ -38,19 +38,3 @@ TABLE4: dict[int, _Row] = {
     4: ((0.515, 0.024), (0.444, 0.029), (0.0892, 0.008), (0.325, 0.008), (0.709, 0.006)),
     5: ((0.294, 0.014), (0.330, 0.020), (0.0188, 0.006), (0.206, 0.007), (0.814, 0.006)),
 }
-
-#: Our method -> the paper's row it is compared with (Tables 1 and 2).
-PAPER_ROW_OF_METHOD: dict[str, str] = {
-    "gt_pose": "Policy w/ GT poses",
-    "lnet": "Ours",
-    "lnet_no_uncertainty": "Policy w/o uncertainty",
-}
-
-
-def paper_row(method: str) -> dict[str, tuple[float, float] | None] | None:
-    """The paper's numbers for our ``method`` ({metric: (mean, std) or None}), or None if it has no counterpart."""
-    label = PAPER_ROW_OF_METHOD.get(method)
-    if label is None:
-        return None
-    values = TABLE1.get(label) or TABLE2[label]
-    return dict(zip(METRIC_NAMES, values, strict=True))

@@ -6,8 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from mor.eval.paper import LOWER_IS_BETTER, METRIC_NAMES, paper_row
-from mor.eval.tables import METRIC_LABELS
+from mor.eval.paper import LOWER_IS_BETTER, METRIC_NAMES
+from mor.eval.tables import METRIC_LABELS, paper_reference
 
 _PPO_KEYS = ("steps", "n_envs", "hidden", "n_steps", "batch_size", "n_epochs", "learning_rate", "gamma", "gae_lambda",
              "clip_range", "ent_coef")
@@ -61,7 +61,7 @@ def policy_card_markdown(variant: str, summaries: dict[str, dict[str, Any]], row
     if not rows:
         lines.append("Not evaluated yet: run `mor eval run --method " + variant + "` then `mor eval results`.")
     for row in rows:
-        reference = paper_row(row["method"])
+        reference = paper_reference(row)
         lines += [f"`{row['method']}`: {len(row['seeds'])} seeds × {row['episodes_per_seed']} episodes per task "
                   "(mean ± std over seeds [95% bootstrap interval]); *paper* = the paper's published number.", "",
                   "| metric | ours | paper |", "|---|---|---|"]

@@ -117,6 +117,16 @@ def find_row(rows: list[dict[str, Any]], match: dict[str, Any]) -> dict[str, Any
     return None
 
 
+def paper_reference(row: dict[str, Any]) -> dict[str, tuple[float, float] | None] | None:
+    """The paper's numbers ({metric: (mean, std) or None}) beside ``row`` in the first table that shows it (the
+    same method in another setting is another table's line), or None where the paper has no counterpart."""
+    for spec in TABLES.values():
+        for line in spec.rows:
+            if line.paper is not None and find_row([row], line.match) is row:
+                return dict(zip(METRIC_NAMES, line.paper, strict=True))
+    return None
+
+
 def row_label(line: TableRow, row: dict[str, Any]) -> str:
     """The line's label, with the encoder our row was trained with where it has one (the baselines)."""
     return f"{line.label} [ours: {row['encoder']}]" if row.get("encoder") else line.label

@@ -75,3 +75,13 @@ def test_a_baseline_plays_the_img_baselines_pick_and_its_own_drop() -> None:
     assert METHODS["lnet_nearest_rule"].skill_owners() == {"pick": "lnet", "drop": "lnet"}
     assert set(METHODS["lnet"].skill_owners()) == {"pick", "drop", "decision"} and METHODS["oracle"].skill_owners() == {}
     assert METHODS["lnet_no_uncertainty"].uses_lnet and not METHODS["gt_pose"].uses_lnet
+
+
+def test_a_rows_paper_reference_is_the_table_line_that_shows_it() -> None:
+    from mor.eval.tables import paper_reference
+
+    assert paper_reference(_row("lnet", 0.5))["pick_success"] == (0.707, 0.020)  # Table 1, "Ours"
+    assert paper_reference({**_row("lnet", 0.5), "n_objects": 2})["rearrange_success"] == (0.592, 0.008)  # Table 4
+    fine_tuned = {**_row("lnet", 0.5), "arena": "polygon", "policy_arena": "polygon"}
+    assert paper_reference(fine_tuned)["pick_success"] == (0.545, 0.018)  # Table 3, fine-tuned
+    assert paper_reference(_row("lnet_nearest_rule", 0.5)) is None
