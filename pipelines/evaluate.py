@@ -17,7 +17,7 @@ from mor.eval.card import write_results_card
 from mor.eval.methods import METHODS, MethodSpec, TrainedPolicies, method_spec
 from mor.eval.policy_card import write_policy_card
 from mor.eval.protocol import EpisodeKey, decider, metric_summaries, play_records, run_protocol
-from mor.eval.results import ROW_KEYS, arena_label, merge_rows
+from mor.eval.results import ROW_KEYS, arena_label, is_zero_shot, merge_rows
 from mor.eval.tables import localisation_headline
 from mor.eval.video import write_policy_video
 from mor.policy.names import TASKS, VARIANTS
@@ -165,7 +165,7 @@ def write_policy_cards(profile: Profile, profile_name: str, video_seed: int = 0)
     """``cards/policy/<variant>/README.md`` and ``episode.mp4`` for every variant with trained policies; each card
     shows this workspace's rows that played those policies (a zero-shot row played the main workspace's)."""
     rows = [row for row in (json.loads(p.read_text()) for p in sorted((paths.RESULTS_CARD / "rows").glob("*.json")))
-            if row.get("profile") == profile_name and row["arena"] == row["policy_arena"]]
+            if row.get("profile") == profile_name and not is_zero_shot(row)]
     written = []
     for variant in VARIANTS:
         folder = paths.POLICY_CARD / variant

@@ -12,6 +12,11 @@ def arena_label(arena: str) -> str:
     return "rect" if arena == "square" else arena
 
 
+def is_zero_shot(row: dict[str, Any]) -> bool:
+    """A row of ``mor eval run --zero-shot``: policies trained in another arena (the main workspace's) played here."""
+    return row["arena"] != row["policy_arena"]
+
+
 def row_key(row: dict[str, Any]) -> tuple:
     return tuple(row.get(key) for key in ROW_KEYS)
 

@@ -18,6 +18,8 @@ from mor.errors import ConfigError
 from mor.eval import paper
 from mor.eval.methods import METHODS
 from mor.eval.paper import LOWER_IS_BETTER, METRIC_NAMES
+from mor.eval.results import is_zero_shot
+from mor.sim.rules import PICK_RANGE
 
 METRIC_LABELS = {"pick_success": "Pick", "drop_success": "Drop", "rearrange_success": "Rearr. success",
                  "fixed_strict": "%FS", "energy_remaining": "%E ↓"}
@@ -240,20 +242,20 @@ def budget_line(rows: list[dict[str, Any]], spec: TableSpec) -> str:
 
 
 #: what the shortfall notes quote from an L-Net's metrics.json (``after_calibration``, medians on the test split)
-LOCALISATION_KEYS = {"agent_m": ("agent_position_error_m", "agent"), "heading_deg": ("heading_error_deg", "heading"),
+LOCALISATION_KEYS = {"agent_m": (("agent_position_error_m",), "agent"),
+                     "heading_deg": (("heading_error_deg",), "heading"),
                      "objects_visible_m": (("object_position_error_m", "visible"), "objects in view"),
                      "objects_in_reach_m": (("object_position_error_m", "visible_in_reach"),
-                                            "objects in view within PICK's 1 m reach"),
+                                            f"objects in view within PICK's {PICK_RANGE:g} m reach"),
                      "objects_seen_m": (("object_position_error_m", "seen"), "objects seen earlier")}
 
 
 def localisation_headline(metrics: dict[str, Any]) -> dict[str, float]:
     """The medians ``LOCALISATION_KEYS`` names from an L-Net's metrics.json content."""
-    after = metrics["after_calibration"]
     headline = {}
     for key, (path, _) in LOCALISATION_KEYS.items():
-        node = after
-        for part in (path,) if isinstance(path, str) else path:
+        node = metrics["after_calibration"]
+        for part in path:
             node = node[part]
         headline[key] = float(node["median"])
     return headline
@@ -262,8 +264,7 @@ def localisation_headline(metrics: dict[str, Any]) -> dict[str, float]:
 def _learning_curves(row: dict[str, Any]) -> str:
     """Links (from ``cards/results/``) to the learning curves of the policies ``row``'s method played and trained."""
     method = METHODS[row["method"]]
-    zero_shot = row["arena"] != row["policy_arena"]  # mor eval run --zero-shot: the main workspace's policies
-    workspace = "." if zero_shot else row.get("workspace", ".")
+    workspace = "." if is_zero_shot(row) else row.get("workspace", ".")  # zero-shot: the main workspace's policies
     trained = row.get("train_steps") or {}
     folder = posixpath.normpath(f"../../{workspace}/cards/policy")
     links = [f"[{task}]({folder}/{owner}/{task}/learning_curve.png)"

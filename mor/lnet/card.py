@@ -9,13 +9,15 @@ from typing import Any
 import yaml
 
 from mor.atomic import atomic_output
+from mor.sim.rules import PICK_RANGE
 
 
 
 _ERROR_ROWS = (("agent position (m)", ("agent_position_error_m",), 3),
                ("heading (deg)", ("heading_error_deg",), 2),
                ("objects in view now (m)", ("object_position_error_m", "visible"), 3),
-               ("objects in view within PICK's reach, ≤ 1 m (m)", ("object_position_error_m", "visible_in_reach"), 3),
+               (f"objects in view within PICK's reach, ≤ {PICK_RANGE:g} m (m)",
+                ("object_position_error_m", "visible_in_reach"), 3),
                ("objects seen earlier (m)", ("object_position_error_m", "seen"), 3),
                ("objects not yet seen (m)", ("object_position_error_m", "unseen"), 3),
                ("all objects (m)", ("object_position_error_m", "all"), 3))
@@ -132,7 +134,7 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
     by_distance = {"test": after} | ({"oracle-driven": oracle["after_calibration"]} if oracle else {})
     if all("object_error_in_view_by_distance" in block for block in by_distance.values()):
         lines += ["## Objects in view: error by distance", "",
-                  "An object far away is a few pixels of the frame; PICK reaches 1 m.", "",
+                  f"An object far away is a few pixels of the frame; PICK reaches {PICK_RANGE:g} m.", "",
                   *distance_table(by_distance), ""]
     if oracle:
         lines += [f"## Errors on oracle-driven episodes ({oracle['after_calibration']['episodes']} Rearrange episodes, "
