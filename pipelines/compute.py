@@ -69,7 +69,12 @@ def update_compute(path: Path, profile: str) -> dict[str, Any]:
     stages.update(stage_seconds(Path(".")))
     for folder in sorted(paths.SETTINGS.glob("*")):
         stages.update({f"{folder.name}: {stage}": s for stage, s in stage_seconds(folder).items()})
+    workspaces: dict[str, float] = {}
+    for stage, seconds in stages.items():
+        name = stage.split(": ", 1)[0] if ": " in stage else "main"  # a setting's stages are "NAME: stage"
+        workspaces[name] = round(workspaces.get(name, 0.0) + seconds, 1)
     result = {"profile": profile, "stages": dict(sorted(stages.items())),
-              "total_seconds": round(sum(stages.values()), 1), "target_seconds": TARGET_SECONDS}
+              "total_seconds": round(sum(stages.values()), 1), "workspace_seconds": dict(sorted(workspaces.items())),
+              "target_seconds": TARGET_SECONDS}
     write_json(path, result)
     return result

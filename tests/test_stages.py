@@ -170,3 +170,16 @@ def test_parallel_evaluation_jobs_give_the_records_of_one_process(workspace: Pat
     (workspace / "datasets/eval/oracle.jsonl").unlink()
     _run("eval", "run", "--method", "oracle", "--profile", "tiny", "--workers", "2", "--backend", backend)
     assert sorted((workspace / "datasets/eval/oracle.jsonl").read_text().splitlines()) == alone
+
+
+def test_compute_sums_each_workspaces_stages_and_all_of_them(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from pipelines.compute import update_compute  # noqa: PLC0415
+
+    monkeypatch.chdir(tmp_path)
+    for folder, seconds in ((Path("."), 60.0), (Path("settings/polygon"), 30.0), (Path("settings/objects_2"), 6.0)):
+        rows = folder / "cards/results/rows"
+        rows.mkdir(parents=True)
+        (rows / "lnet.json").write_text(json.dumps({"wall_seconds": seconds}))
+    compute = update_compute(Path("compute.json"), "tiny")
+    assert compute["stages"]["polygon: eval run lnet"] == 30.0 and compute["total_seconds"] == 96.0
+    assert compute["workspace_seconds"] == {"main": 60.0, "objects_2": 6.0, "polygon": 30.0}

@@ -43,8 +43,11 @@ def compute_section(compute: dict[str, Any] | None) -> list[str]:
              f"Wall time of each stage's last run on the machine that ran it (from the files the stages write, kept "
              f"in `compute.json`): **{total / 3600:.2f} h in all, {verdict} the {target / 3600:.0f} h target** for "
              "this profile from an empty checkout. A resumed stage counts from its restart, and stages that shared "
-             "the machine with others ran slower than they would alone.", "",
-             "| stage | minutes |", "|---|---|"]
+             "the machine with others ran slower than they would alone.", ""]
+    if compute.get("workspace_seconds"):
+        lines += ["By workspace (main, then each setting): " + ", ".join(
+            f"{name} {seconds / 3600:.2f} h" for name, seconds in compute["workspace_seconds"].items()) + ".", ""]
+    lines += ["| stage | minutes |", "|---|---|"]
     lines += [f"| {stage} | {seconds / 60:.1f} |" for stage, seconds in compute["stages"].items()]
     return lines
 
