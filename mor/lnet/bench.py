@@ -17,6 +17,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
+from torch.utils.flop_counter import FlopCounterMode
 
 from mor.lnet.calibration import Calibration
 from mor.lnet.model import LNet
@@ -31,7 +32,9 @@ STREAMING_ENV = "MOR/Rearrange-v0"
 @torch.no_grad()
 def benchmark_lnet(config: LNetConfig, image_size: int, batch_sizes: list[int], repeats: int,
                    steps: int = 20) -> dict[str, Any]:
-    """Median frames/s over ``repeats`` runs of ``steps`` single-frame steps (state carried) per batch size."""
+    """Median frames/s over ``repeats`` runs of ``steps`` single-frame steps (state carried) per batch size, and
+    the multiply-adds of one frame's step (torch's FLOP counter: convolutions and matrix products), the whole
+    model's and its image encoder's."""
     model = LNet(config).eval()
     results = {}
     for batch in batch_sizes:
@@ -39,7 +42,13 @@ def benchmark_lnet(config: LNetConfig, image_size: int, batch_sizes: list[int], 
         classes = torch.tensor([[0, 7, 13, -1, -1]]).expand(batch, -1)
         held = torch.full((batch, 1), -1)
         actions = torch.zeros((batch, 1), dtype=torch.long)
-        model(images, classes, held, actions)  # warm-up
+        per_frame = {}
+        with FlopCounterMode(display=False) as counter:
+            model(images, classes, held, actions)  # also the warm-up
+        per_frame["model"] = counter.get_total_flops() / 2 / batch
+        with FlopCounterMode(display=False) as counter:
+            model.posenet.encoder.encode(images[:, 0])
+        per_frame["encoder"] = counter.get_total_flops() / 2 / batch
         rates = []
         for _ in range(repeats):
             state = None
@@ -47,7 +56,8 @@ def benchmark_lnet(config: LNetConfig, image_size: int, batch_sizes: list[int], 
             for _ in range(steps):
                 _, _, state = model(images, classes, held, actions, state)
             rates.append(batch * steps / (time.perf_counter() - start))
-        results[f"batch_{batch}"] = {"frames_per_s": statistics.median(rates), "runs": rates}
+        results[f"batch_{batch}"] = {"frames_per_s": statistics.median(rates), "runs": rates,
+                                     "multiply_adds_per_frame": per_frame}
     return {"benchmark": "lnet", "config": config.model_dump(), "image_size": image_size, "device": "cpu",
             "torch_threads": torch.get_num_threads(), "torch": torch.__version__, "results": results,
             "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}}

@@ -146,6 +146,17 @@ def test_the_committed_model_loads_with_one_call_and_checks_what_it_was_made_wit
     assert runner.identity.startswith(saved["dataset_version"] + "-") and other_runner.identity != runner.identity
 
 
+def test_the_lnet_benchmark_counts_the_multiply_adds_of_a_frame_and_of_its_encoder() -> None:
+    from mor.lnet.bench import benchmark_lnet  # noqa: PLC0415
+
+    config = LNetConfig(encoder="compact", feature_dim=16, mlp_hidden=16, lstm_hidden=16)
+    counted = benchmark_lnet(config, 32, [1, 2], repeats=1, steps=1)["results"]
+    first = 32 * 16 * 16 * 3 * 9  # the first convolution alone: 32 channels on a 16x16 map, 3x3 over 3 channels
+    assert counted["batch_1"]["multiply_adds_per_frame"] == counted["batch_2"]["multiply_adds_per_frame"]
+    assert first < counted["batch_1"]["multiply_adds_per_frame"]["encoder"] < counted["batch_1"][
+        "multiply_adds_per_frame"]["model"]
+
+
 def test_streaming_benchmark_times_the_environments_and_the_lnet_in_one_run() -> None:
     from mor.lnet.bench import benchmark_streaming  # noqa: PLC0415
     from mor.sim.config import SimConfig  # noqa: PLC0415
