@@ -414,8 +414,8 @@ def bench_lnet(
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
-    """L-Net inference frames/s at batch 1 and 64, and its streaming step beside the environments' own rendered
-    steps at batch --n-envs in the same run (one torch thread, one render thread)."""
+    """L-Net inference frames/s at batch 1 and 64, and its streaming step (eager and compiled) beside the
+    environments' own rendered steps at batch --n-envs in the same run (one torch thread, one render thread)."""
     os.environ.setdefault("LP_NUM_THREADS", "1")  # one llvmpipe render thread, as in mor bench sim
     import torch
 
@@ -430,6 +430,9 @@ def bench_lnet(
     streaming = result["streaming"] = benchmark_streaming(config.lnet.model, config.sim, n_envs, steps, repeats)
     typer.echo(f"streaming at batch {n_envs}: L-Net {streaming['lnet_frames_per_s']:.0f} frames/s, environments "
                f"{streaming['env_frames_per_s']:.0f} frames/s, ratio {streaming['lnet_over_env']:.2f}")
+    fused = streaming["compiled"]
+    typer.echo(f"compiled step: L-Net {fused['lnet_frames_per_s']:.0f} frames/s, ratio {fused['lnet_over_env']:.2f} "
+               f"({fused['over_eager']:.2f}x the eager step; estimates within {fused['largest_difference']:.1e})")
     typer.echo(f"wrote {write_json(out, result)}")
 
 

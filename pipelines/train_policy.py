@@ -24,13 +24,15 @@ PUBLISHED = (POLICY_FILE, "meta.json", "summary.json", "log.csv", "learning_curv
 
 def lnet_runner(variant: Variant, profile: Profile) -> Any:
     """The committed L-Net (``cards/lnet/model.pt`` + calibration; the main workspace's where the setting says
-    ``lnet_from_main``) for the L-Net variants; None for gt_pose."""
+    ``lnet_from_main``; compiled when the profile's ``lnet.compile_step``) for the L-Net variants; None for
+    gt_pose."""
     if variant == "gt_pose":
         return None
     from mor.lnet.runtime import load_lnet  # noqa: PLC0415 - torch model only where needed
 
     from_main = profile.setting is not None and profile.setting.lnet_from_main
-    return load_lnet((paths.MAIN / paths.LNET_CARD if from_main else paths.LNET_CARD) / "model.pt")
+    return load_lnet((paths.MAIN / paths.LNET_CARD if from_main else paths.LNET_CARD) / "model.pt",
+                     compiled=profile.lnet.compile_step)
 
 
 def starting_policy(profile: Profile, variant: Variant, task: Task) -> Path | None:

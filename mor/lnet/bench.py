@@ -12,6 +12,7 @@ import os
 import platform
 import statistics
 import time
+from dataclasses import fields
 from typing import Any
 
 import gymnasium as gym
@@ -22,8 +23,9 @@ from torch.utils.flop_counter import FlopCounterMode
 from mor.lnet.calibration import Calibration
 from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig
-from mor.lnet.runtime import LNetRunner
+from mor.lnet.runtime import Estimates, LNetRunner
 from mor.sim.config import SimConfig
+from mor.sim.geometry import wrap_angle
 from mor.sim.rules import N_ACTIONS
 
 STREAMING_ENV = "MOR/Rearrange-v0"
@@ -64,24 +66,38 @@ def benchmark_lnet(config: LNetConfig, image_size: int, batch_sizes: list[int], 
 
 
 def benchmark_streaming(config: LNetConfig, sim: SimConfig, n_envs: int, steps: int, repeats: int,
-                        seed: int = 0) -> dict[str, Any]:
+                        seed: int = 0, compiled: bool = True) -> dict[str, Any]:
     """The environments' rendered steps and the L-Net's streaming step over the same ``n_envs`` envs (random
     actions, resets included): median frames/s of each over ``repeats`` runs of ``steps`` vector steps, and
-    ``lnet_over_env`` = L-Net frames/s / environment frames/s (>= 1: the L-Net is not the bottleneck)."""
+    ``lnet_over_env`` = L-Net frames/s / environment frames/s (>= 1: the L-Net is not the bottleneck).
+
+    The step runs eagerly and, with ``compiled``, also through ``torch.compile`` (same weights, same frames, timed
+    separately in the same loop): ``compiled`` holds its frames/s, ratio, runs, the largest difference of its
+    estimates from the eager step's (headings wrapped), and the warm-up run's seconds (the compilation)."""
     envs = [gym.make(STREAMING_ENV, **sim.model_dump()) for _ in range(n_envs)]
-    runner = LNetRunner(LNet(config), Calibration(), sim.image_size, "benchmark")
+    model = LNet(config)
+    runners = {"eager": LNetRunner(model, Calibration(), sim.image_size, "benchmark")}
+    if compiled:
+        runners["compiled"] = LNetRunner(model, Calibration(), sim.image_size, "benchmark", compiled=True)
     rng = np.random.default_rng(seed)
     observations = [env.reset(seed=seed + i)[0] for i, env in enumerate(envs)]
-    state, previous = runner.initial_state(n_envs), np.full(n_envs, -1)
-    env_rates, lnet_rates = [], []
-    for run in range(repeats + 1):  # run 0 warms up
-        env_seconds = lnet_seconds = 0.0
+    states = {name: runner.initial_state(n_envs) for name, runner in runners.items()}
+    previous = np.full(n_envs, -1)
+    env_rates, lnet_rates = [], {name: [] for name in runners}
+    warm_up_seconds, largest_difference = 0.0, 0.0
+    for run in range(repeats + 1):  # run 0 warms up (and compiles)
+        env_seconds, lnet_seconds = 0.0, dict.fromkeys(runners, 0.0)
         for _ in range(steps):
-            start = time.perf_counter()
-            _, state = runner.step(np.stack([o["image"] for o in observations]),
-                                           np.stack([o["object_classes"] for o in observations]),
-                                           np.array([o["held"] for o in observations]), previous, state)
-            lnet_seconds += time.perf_counter() - start
+            inputs = (np.stack([o["image"] for o in observations]), np.stack([o["object_classes"] for o in observations]),
+                      np.array([o["held"] for o in observations]), previous)
+            estimates = {}
+            for name, runner in runners.items():
+                start = time.perf_counter()
+                estimates[name], states[name] = runner.step(*inputs, states[name])
+                lnet_seconds[name] += time.perf_counter() - start
+            if compiled:
+                largest_difference = max(largest_difference, _largest_difference(estimates["eager"],
+                                                                                  estimates["compiled"]))
             actions = rng.integers(0, N_ACTIONS, n_envs)
             done = np.zeros(n_envs, dtype=bool)
             start = time.perf_counter()
@@ -91,14 +107,35 @@ def benchmark_streaming(config: LNetConfig, sim: SimConfig, n_envs: int, steps: 
                     observations[i], _ = env.reset()
                     done[i] = True
             env_seconds += time.perf_counter() - start
-            state, previous = runner.reset(state, done), np.where(done, -1, actions)
+            states = {name: runners[name].reset(state, done) for name, state in states.items()}
+            previous = np.where(done, -1, actions)
+        if not run and compiled:
+            warm_up_seconds = lnet_seconds["compiled"]
         if run:
             env_rates.append(n_envs * steps / env_seconds)
-            lnet_rates.append(n_envs * steps / lnet_seconds)
+            for name in runners:
+                lnet_rates[name].append(n_envs * steps / lnet_seconds[name])
     for env in envs:
         env.close()
-    env_rate, lnet_rate = statistics.median(env_rates), statistics.median(lnet_rates)
-    return {"n_envs": n_envs, "env_id": STREAMING_ENV, "steps_per_run": steps, "repeats": repeats,
-            "env_frames_per_s": env_rate, "lnet_frames_per_s": lnet_rate, "lnet_over_env": lnet_rate / env_rate,
-            "runs_env": env_rates, "runs_lnet": lnet_rates, "torch_threads": torch.get_num_threads(),
-            "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS"), "sim": sim.model_dump()}
+    env_rate = statistics.median(env_rates)
+    rates = {name: statistics.median(values) for name, values in lnet_rates.items()}
+    result = {"n_envs": n_envs, "env_id": STREAMING_ENV, "steps_per_run": steps, "repeats": repeats,
+              "env_frames_per_s": env_rate, "lnet_frames_per_s": rates["eager"],
+              "lnet_over_env": rates["eager"] / env_rate, "runs_env": env_rates, "runs_lnet": lnet_rates["eager"],
+              "torch_threads": torch.get_num_threads(), "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS"),
+              "sim": sim.model_dump()}
+    if compiled:
+        result["compiled"] = {"lnet_frames_per_s": rates["compiled"], "lnet_over_env": rates["compiled"] / env_rate,
+                              "over_eager": rates["compiled"] / rates["eager"], "runs_lnet": lnet_rates["compiled"],
+                              "largest_difference": largest_difference, "warm_up_seconds": warm_up_seconds}
+    return result
+
+
+def _largest_difference(first: Estimates, second: Estimates) -> float:
+    """The largest absolute difference between two ``Estimates`` of the same frames, over all their arrays
+    (headings on the circle)."""
+    def difference(name: str) -> np.ndarray:
+        delta = getattr(first, name) - getattr(second, name)
+        return np.abs(wrap_angle(delta) if name == "heading" else delta)
+
+    return max(float(np.max(difference(f.name))) for f in fields(first))

@@ -66,8 +66,13 @@ class LNetRunner:
     """A trained L-Net with its calibration, stepped one frame at a time over N environments."""
 
     def __init__(self, model: LNet, calibration: Calibration, image_size: int, dataset_version: str,
-                 device: torch.device | str = "cpu", checkpoint_digest: str | None = None) -> None:
+                 device: torch.device | str = "cpu", checkpoint_digest: str | None = None,
+                 compiled: bool = False) -> None:
         self.model = model.to(device).eval()
+        # compiled: the step runs as torch.compile's fused kernels (the same arithmetic up to float rounding, about
+        # 1e-7 here; about a minute to compile on first use, then cached on disk by torch). docs/performance.md.
+        self.compiled = compiled
+        self._network = torch.compile(self.model, dynamic=False) if compiled else self.model
         self.calibration = calibration
         self.image_size = image_size
         self.dataset_version = dataset_version
@@ -126,7 +131,7 @@ class LNetRunner:
         except ValueError as error:
             raise ObservationMismatch(str(error)) from None
         device = self.device
-        _, tracked, memory = self.model(
+        _, tracked, memory = self._network(
             inputs.images.to(device)[:, None], inputs.object_classes.to(device), inputs.held.to(device)[:, None],
             torch.as_tensor(previous_actions, dtype=torch.long, device=device)[:, None], state.memory)
         return tracked, StreamState(state.n_envs, memory)
@@ -154,12 +159,12 @@ class LNetRunner:
 
 
 def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str, Any] | None = None,
-              calibrated: bool = True) -> LNetRunner:
+              calibrated: bool = True, compiled: bool = False) -> LNetRunner:
     """The trained L-Net at ``path`` with the calibration stored beside it (``calibration.json``).
 
     expected: a ``mor.lnet.checkpoint.signature`` (or part of one) the checkpoint must match: another tracker,
     config, dataset version or image size is one clear error naming both sides. calibrated=False: identity scales
-    (what the calibration stage itself needs).
+    (what the calibration stage itself needs). compiled: the streaming step through ``torch.compile``.
     """
     path = Path(path)
     saved = load_checkpoint(path, expected or {}, device)
@@ -167,4 +172,4 @@ def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str
     calibration = read_calibration(path.parent / CALIBRATION_FILE, version) if calibrated else Calibration()
     digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
     return LNetRunner(model_from_checkpoint(saved, device), calibration, int(saved["image_size"]), version, device,
-                      digest)
+                      digest, compiled)

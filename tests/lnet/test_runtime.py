@@ -162,8 +162,11 @@ def test_streaming_benchmark_times_the_environments_and_the_lnet_in_one_run() ->
     from mor.sim.config import SimConfig  # noqa: PLC0415
 
     result = benchmark_streaming(SMALL, SimConfig(image_size=SIZE, n_objects=2), n_envs=2, steps=3, repeats=2)
-    assert len(result["runs_env"]) == len(result["runs_lnet"]) == 2
+    assert len(result["runs_env"]) == len(result["runs_lnet"]) == len(result["compiled"]["runs_lnet"]) == 2
     assert result["lnet_over_env"] == pytest.approx(result["lnet_frames_per_s"] / result["env_frames_per_s"])
+    assert result["compiled"]["lnet_over_env"] == pytest.approx(
+        result["compiled"]["lnet_frames_per_s"] / result["env_frames_per_s"])
+    assert result["compiled"]["largest_difference"] < 1e-4  # the compiled step computes the same estimates
 
 
 def test_live_oracle_episodes_are_scored_like_the_test_split() -> None:
