@@ -30,7 +30,8 @@ from mor.atomic import atomic_output
 from mor.policy.figures import write_learning_curve
 from mor.policy.params import PPOParams
 from mor.policy.hierarchy import POLICY_FILE
-from mor.policy.signature import PolicySignature, write_signature
+from mor.errors import ConfigError
+from mor.policy.signature import PolicySignature, check_signature, write_signature
 
 CSV_FIELDS = ("steps", "wall_seconds", "steps_per_second", "episodes", "return_mean", "success_mean")
 
@@ -147,6 +148,11 @@ def train_policy(
     env = make_env()
     checkpoint = out_dir / "checkpoint.zip"
     if checkpoint.exists():
+        try:  # a checkpoint of another L-Net, world or layout is not resumed
+            check_signature(out_dir / "meta.json", signature)
+        except ConfigError as error:
+            raise ConfigError(f"{checkpoint}: not resumed, it was trained for another signature ({error}); remove "
+                              f"{out_dir} to train this one from the start") from None
         model = MaskablePPO.load(checkpoint, env=env, device="cpu")
     else:
         dict_input = isinstance(env.observation_space, spaces.Dict)
@@ -160,6 +166,7 @@ def train_policy(
         )
         if init_from is not None:
             warm_start(model, init_from[0], init_from[1], signature.observation)
+    write_signature(out_dir / "meta.json", signature)  # what this folder's checkpoints are, from the first one on
     model.set_logger(configure(str(out_dir / "tb"), ["tensorboard"]))
     monitor = TrainingMonitor(out_dir, params.steps, params.checkpoint_every, label, progress)
     started = time.monotonic()

@@ -90,6 +90,9 @@ def test_training_writes_its_outputs_and_resumes_from_the_checkpoint(tmp_path: P
     with (tmp_path / "log.csv").open() as handle:
         steps = [int(row["steps"]) for row in csv.DictReader(handle)]
     assert steps == sorted(steps) and steps[-1] == 128 and steps[0] < 64  # appended, not restarted
+    other = PolicySignature.of("pick", "gt_pose", 2, "polygon", None)  # e.g. another world or another L-Net
+    with pytest.raises(ConfigError, match=r"checkpoint.zip: not resumed.*arena='square' but this run needs 'polygon'"):
+        train_policy(make(longer), longer, other, tmp_path, 0, "pick", progress=False)
 
 
 def test_a_policy_of_another_layout_is_one_clear_error(tmp_path: Path) -> None:
