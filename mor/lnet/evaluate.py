@@ -46,7 +46,8 @@ class Predictions:
     agent_pose (N, 3) truth; agent_mean (N, 2); agent_tril (N, 2, 2); heading (N,); kappa (N,);
     object_truth (N, K, 2); object_mean (N, K, 2); object_tril (N, K, 2, 2); present (N, K) slot in use;
     visible (N, K) in view now (``rules.visible``); since_seen (N, K) frames since the object was last visible or
-    held (0: now; -1: not yet in this episode); held (N,) index or -1; episode (N,); frame (N,).
+    held (0: now; -1: not yet in this episode); sightings (N, K) frames of the episode so far (this one included)
+    in which the object was in view; held (N,) index or -1; episode (N,); frame (N,).
     """
 
     agent_pose: np.ndarray
@@ -60,6 +61,7 @@ class Predictions:
     present: np.ndarray
     visible: np.ndarray
     since_seen: np.ndarray
+    sightings: np.ndarray
     held: np.ndarray
     episode: np.ndarray
     frame: np.ndarray
@@ -93,7 +95,8 @@ def episode_predictions(estimate: dict[str, np.ndarray], agent_pose: np.ndarray,
         heading=estimate["heading"], kappa=estimate["kappa"], object_truth=object_positions,
         object_mean=estimate["object_mean"], object_tril=estimate["object_tril"],
         present=np.broadcast_to(present, (length, len(present))), visible=visible,
-        since_seen=steps_since_seen(visible, held), held=held, episode=np.full(length, episode),
+        since_seen=steps_since_seen(visible, held), sightings=np.cumsum(visible, axis=0), held=held,
+        episode=np.full(length, episode),
         frame=np.arange(length))
 
 
@@ -249,6 +252,8 @@ def _summary(values: np.ndarray) -> dict[str, float]:
 SINCE_SEEN_BINS = (0, 1, 2, 4, 8, 16, 32, 64, 128)
 #: Bins of the distance (m) from the agent to an object in view: [low, high) edges; the last is open.
 DISTANCE_BINS = (0.0, 1.0, 2.0, 3.0, 4.0, 6.0)
+#: Bins of how many frames an object has been in view so far: [low, high) edges; the last is open.
+SIGHTINGS_BINS = (1, 2, 5, 20)
 
 
 def _median_by_bins(error: np.ndarray, value: np.ndarray, rows: np.ndarray, bins: tuple[float, ...]
@@ -282,6 +287,24 @@ def error_by_distance_in_view(predictions: Predictions) -> dict[str, list]:
     (``DISTANCE_BINS``): a far object is a few pixels of a 64 px frame."""
     p = predictions
     return _median_by_bins(_object_error(p), _object_distance(p), p.present & p.visible, DISTANCE_BINS)
+
+
+def coverage_by_sightings(predictions: Predictions, object_d2: np.ndarray, object_error: np.ndarray
+                          ) -> dict[str, list]:
+    """Objects seen earlier and not held now, per bin of how many frames they have been in view so far
+    (``SIGHTINGS_BINS``): median error (m), median squared Mahalanobis distance d^2 (2 ln 2 = 1.39 for an honest
+    2-D Gaussian), count and 1/2/3-sigma coverage: whether the stated uncertainty follows the error as sightings
+    accumulate. object_d2, object_error: (N, K) of ``predictions``."""
+    p = predictions
+    rows = p.present & p.seen & (p.held[:, None] != np.arange(p.present.shape[1]))
+    edges = [*SIGHTINGS_BINS, np.inf]
+    masks = [rows & (p.sightings >= low) & (p.sightings < high) for low, high in zip(edges[:-1], edges[1:],
+                                                                                       strict=True)]
+    return {"bin_start": list(SIGHTINGS_BINS), "count": [int(m.sum()) for m in masks],
+            "median_m": [float(np.median(object_error[m])) if m.any() else None for m in masks],
+            "median_d2": [float(np.median(object_d2[m])) if m.any() else None for m in masks],
+            **{f"{k}sigma": [float(np.mean(object_d2[m] <= k * k)) if m.any() else None for m in masks]
+               for k in SIGMAS}}
 
 
 def metrics(predictions: Predictions) -> dict[str, Any]:
@@ -327,6 +350,7 @@ def metrics(predictions: Predictions) -> dict[str, Any]:
         "object_position_error_m": {name: _summary(object_error[rows]) for name, rows in groups.items()},
         "object_error_by_steps_since_seen": error_by_steps_since_seen(p),
         "object_error_in_view_by_distance": error_by_distance_in_view(p),
+        "objects_seen_by_sightings": coverage_by_sightings(p, object_d2, object_error),
         "coverage": coverage,
         "reliability": reliability,
     }

@@ -130,7 +130,7 @@ def _predictions(n: int, true_scale: float, stated_scale: float) -> Predictions:
         object_truth=objects, object_mean=objects + rng.normal(scale=true_scale, size=(n, 5, 2)),
         object_tril=np.broadcast_to(np.eye(2) * stated_scale, (n, 5, 2, 2)).copy(),
         present=np.tile([True, True, True, False, False], (n, 1)), visible=np.ones((n, 5), bool),
-        since_seen=np.zeros((n, 5), int), held=np.full(n, -1),
+        since_seen=np.zeros((n, 5), int), sightings=np.ones((n, 5), int), held=np.full(n, -1),
         episode=np.zeros(n, int), frame=np.arange(n))
 
 
@@ -147,6 +147,29 @@ def test_calibration_repairs_overconfidence() -> None:
         assert after["agent_position"][f"{k}sigma"] == pytest.approx(NOMINAL_2D[k], abs=0.03)
         assert after["objects_seen"][f"{k}sigma"] == pytest.approx(NOMINAL_2D[k], abs=0.03)
     assert Calibration().apply(predictions).agent_tril is not None
+
+
+def test_coverage_by_sightings_bins_the_remembered_objects_by_how_often_they_were_in_view() -> None:
+    from dataclasses import replace  # noqa: PLC0415
+
+    from mor.lnet.evaluate import SIGHTINGS_BINS  # noqa: PLC0415
+
+    honest = _predictions(4000, true_scale=0.2, stated_scale=0.2)
+    # slot 1 was seen 30 times and states a tenth of its error; slot 0 seen once, honest; slot 2 is held
+    tril = honest.object_tril.copy()
+    tril[:, 1] *= 0.1
+    sightings = np.tile([1, 30, 3, 0, 0], (4000, 1))
+    scored = metrics(replace(honest, object_tril=tril, sightings=sightings, held=np.full(4000, 2)))
+    table = scored["objects_seen_by_sightings"]
+    assert table["bin_start"] == list(SIGHTINGS_BINS)
+    once, many = SIGHTINGS_BINS.index(1), len(SIGHTINGS_BINS) - 1
+    assert table["count"][once] == table["count"][many] == 4000 and sum(table["count"]) == 8000  # held: left out
+    for k in (1, 2, 3):
+        assert table[f"{k}sigma"][once] == pytest.approx(NOMINAL_2D[k], abs=0.03)
+        assert table[f"{k}sigma"][many] < NOMINAL_2D[k] - 0.2
+    assert table["median_m"][once] == pytest.approx(0.2 * np.sqrt(2 * np.log(2)), rel=0.1)  # Rayleigh median
+    assert table["median_d2"][once] == pytest.approx(2 * np.log(2), rel=0.1)
+    assert table["median_d2"][many] == pytest.approx(200 * np.log(2), rel=0.1)  # a tenth of the error stated
 
 
 def test_heading_central_mass_agrees_with_the_interval_it_names() -> None:
