@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from mor.config import Profile
+from mor.data.manifest import file_sha256
 from mor.data.parallel import unordered_map
 from mor.errors import ConfigError
 from mor.eval.card import write_results_card
@@ -20,6 +21,7 @@ from mor.eval.protocol import EpisodeKey, decider, metric_summaries, play_record
 from mor.eval.results import ROW_KEYS, arena_label, is_zero_shot, merge_rows
 from mor.eval.tables import localisation_headline
 from mor.eval.video import write_policy_video
+from mor.policy.hierarchy import POLICY_FILE
 from mor.policy.names import TASKS, VARIANTS
 from mor.policy.observations import (BatchTracker, GroundTruthBatchTracker, RenderingTruthTracker, SingleTracker,
                                      has_uncertainty)
@@ -43,24 +45,25 @@ def policy_root(profile: Profile, zero_shot: bool) -> Path:
 
 
 def load_method(profile: Profile, method: MethodSpec, zero_shot: bool = False
-                ) -> tuple[TrainedPolicies, Callable[[int], BatchTracker]]:
-    """A learned method's committed policies (checked against what they were trained on) and its tracker factory;
-    zero_shot: the main workspace's policies through this workspace's L-Net (``policy_root``)."""
+                ) -> tuple[TrainedPolicies, Callable[[int], BatchTracker], str | None]:
+    """A learned method's committed policies (checked against what they were trained on), its tracker factory and
+    the identity of the L-Net it observes through (None without one); zero_shot: the main workspace's policies
+    through this workspace's L-Net (``policy_root``)."""
     sim, root = profile.sim, policy_root(profile, zero_shot)
     if method.is_baseline:
         policies = TrainedPolicies.load_baseline(root, method.variant, sim.n_objects, sim.arena,
                                                  sim.image_size, profile.policy.skills_deterministic)
-        return policies, lambda n: RenderingTruthTracker()
+        return policies, lambda n: RenderingTruthTracker(), None
     runner = lnet_runner(method.variant, profile)
     version = runner.identity if runner is not None else None
     policies = TrainedPolicies.load(root, method.variant, sim.n_objects, sim.arena, version,
                                     with_decision=method.decision == "learned",
                                     deterministic=profile.policy.skills_deterministic, zero_shot=zero_shot)
     if runner is None:
-        return policies, lambda n: GroundTruthBatchTracker()
+        return policies, lambda n: GroundTruthBatchTracker(), None
     from mor.policy.lnet_tracking import LNetBatchTracker  # noqa: PLC0415
 
-    return policies, lambda n: LNetBatchTracker(runner, n)
+    return policies, lambda n: LNetBatchTracker(runner, n), version
 
 
 def policy_folders(method: MethodSpec, root: Path) -> dict[str, Path]:
@@ -75,7 +78,8 @@ def evaluate_job(job: tuple[Path, Profile, str, bool, list[EpisodeKey]]) -> list
     os.chdir(root)  # the workspace's relative paths (a Ray worker starts elsewhere)
     os.environ.setdefault("LP_NUM_THREADS", "1")  # one llvmpipe render thread per worker
     method = method_spec(method_name)
-    policies, tracker_factory = load_method(profile, method, zero_shot) if method.variant is not None else (None, None)
+    policies, tracker_factory, _ = load_method(profile, method, zero_shot) if method.variant is not None else (
+        None, None, None)
     evaluate = profile.evaluate
     return list(play_records(method, profile.sim, keys, policies, tracker_factory, evaluate.n_envs, evaluate.horizon))
 
@@ -87,9 +91,12 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
     method = method_spec(method_name)
     sim, protocol = profile.sim, profile.evaluate
     policies, tracker_factory, train_steps, policy_arena = None, None, None, sim.arena
+    played_by: dict[str, Any] = {}
     if method.variant is not None:
-        policies, tracker_factory = load_method(profile, method, zero_shot)
+        policies, tracker_factory, lnet_version = load_method(profile, method, zero_shot)
         folders = policy_folders(method, policy_root(profile, zero_shot))
+        played_by = {"policies": {task: file_sha256(folder / POLICY_FILE)[:12] for task, folder in folders.items()},
+                     "lnet_version": lnet_version}
         train_steps = {task: json.loads((folder / "summary.json").read_text())["steps"]
                        for task, folder in folders.items()}
         policy_arena = read_signature(folders["pick"] / "meta.json").arena
@@ -101,7 +108,8 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
                                  protocol.workers, protocol.backend)
     started = time.perf_counter()
     records = run_protocol(method, sim, protocol.seeds, protocol.episodes, paths.EVAL / f"{name}.jsonl",
-                           policies, tracker_factory, protocol.n_envs, progress, protocol.horizon, run_jobs)
+                           policies, tracker_factory, protocol.n_envs, progress, protocol.horizon, run_jobs,
+                           played_by)
     row = {"method": method.name, "encoder": profile.policy.baseline.encoder if method.is_baseline else None,
            "arena": arena_label(sim.arena), "policy_arena": arena_label(policy_arena), "n_objects": sim.n_objects,
            "seeds": protocol.seeds, "episodes_per_seed": protocol.episodes, "train_steps": train_steps,
@@ -116,7 +124,7 @@ def policy_video(profile: Profile, method_name: str, seed: int, out: Path) -> di
     method = method_spec(method_name)
     if method.variant is None:
         raise ConfigError(f"--policy: {method_name!r} is scripted; use mor sim video --policy {method_name}")
-    policies, tracker_factory = load_method(profile, method)
+    policies, tracker_factory, _ = load_method(profile, method)
     arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
     return write_policy_video(out, profile.sim, SingleTracker(tracker_factory(1)), policies.pick, policies.drop,
                               decider(method, policies, arena), has_uncertainty(method.variant), seed,

@@ -16,6 +16,7 @@ import numpy as np
 from tqdm import tqdm
 
 from mor.atomic import atomic_output
+from mor.errors import ConfigError
 from mor.eval.lockstep import Decide, Encode, play_lockstep, pose_inputs
 from mor.eval.methods import MethodSpec, TrainedPolicies
 from mor.eval.stats import summarize
@@ -115,13 +116,17 @@ def run_protocol(
     method: MethodSpec, sim: SimConfig, seeds: list[int], episodes: int, records_path: Path,
     policies: TrainedPolicies | None = None, tracker_factory: Callable[[int], BatchTracker] | None = None,
     n_envs: int = 8, progress: bool = True, horizon: int | None = None, run_jobs: RunJobs | None = None,
+    played_by: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """Play every (task, seed, episode) not yet in ``records_path`` (JSON Lines, appended as records come:
     resumable) and return all of them in protocol order.
 
     In this process (``play_records`` with ``policies`` and ``tracker_factory``), or, with ``run_jobs``, by
     whatever runs the ``protocol_jobs`` (``pipelines.evaluate``: worker processes or Ray tasks).
+    played_by: what plays the episodes (e.g. the policies' digests and the L-Net's identity), stored beside the
+    records (``played_by_path``); records played by anything else are not resumed: one clear error.
     """
+    claim_records(records_path, played_by or {})
     done = {(r["task"], r["seed"], r["episode"]): r for r in read_records(records_path)}
     todo = [key for key in episode_keys(seeds, episodes) if key not in done]
     with atomic_output(records_path) as partial:  # drop a line cut short by a kill before appending
@@ -157,6 +162,23 @@ def _play(method: MethodSpec, sim: SimConfig, todo: list[tuple[str, int, int]], 
         decide = decider(method, policies, Arena.build(sim.arena, sim.arena_size))
         yield from play_lockstep(task, keys, sim_of(method, sim), tracker_factory(n), skills, decide,
                                  method_inputs(method), n, **env_kwargs)
+
+
+def played_by_path(records_path: Path) -> Path:
+    """Where ``run_protocol`` stores what played the records at ``records_path``: ``<name>.played_by.json``."""
+    return records_path.with_name(f"{records_path.stem}.played_by.json")
+
+
+def claim_records(records_path: Path, played_by: dict[str, Any]) -> None:
+    """Record that ``played_by`` plays the episodes of ``records_path``; ConfigError naming both sides if records
+    there were played by something else (or by something unrecorded), since resuming would mix the two."""
+    sidecar = played_by_path(records_path)
+    stated = json.loads(sidecar.read_text()) if sidecar.is_file() else None
+    if read_records(records_path) and stated != played_by:
+        raise ConfigError(f"{records_path}: its records were played by {stated} but this run plays {played_by}; "
+                          f"remove it and {sidecar.name} to evaluate anew")
+    with atomic_output(sidecar) as partial:
+        partial.write_text(json.dumps(played_by, indent=2, sort_keys=True) + "\n")
 
 
 def read_records(path: Path) -> list[dict[str, Any]]:

@@ -41,6 +41,10 @@ def test_every_method_plays_the_same_episodes_and_a_rerun_resumes(tmp_path) -> N
     again = run_protocol(method_spec("oracle"), SIM, [0, 1], 2, tmp_path / "oracle.jsonl", progress=False)
     assert [r["metrics"] for r in again] == [r["metrics"] for r in oracle]
     assert len(read_records(tmp_path / "oracle.jsonl")) == len(oracle)
+    with pytest.raises(ConfigError, match=r"oracle.jsonl: its records were played by \{\} but this run plays "
+                                          r"\{'lnet_version': 'b'\}; remove it and oracle.played_by.json"):
+        run_protocol(method_spec("oracle"), SIM, [0, 1], 2, tmp_path / "oracle.jsonl", progress=False,
+                     played_by={"lnet_version": "b"})  # e.g. a new L-Net: the old records are not resumed
     summaries = metric_summaries(oracle, resamples=200)
     assert set(summaries) == {"pick_success", "drop_success", "rearrange_success", "fixed_strict", "energy_remaining"}
     assert summaries["pick_success"]["mean"] == 1.0
