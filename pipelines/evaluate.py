@@ -71,6 +71,11 @@ def policy_folders(method: MethodSpec, root: Path) -> dict[str, Path]:
     return {task: root / owner / task for task, owner in method.skill_owners().items()}
 
 
+def policy_digests(folders: dict[str, Path]) -> dict[str, str]:
+    """task -> the first 12 hex digits of the SHA-256 of the policy file in its folder (``policy_folders``)."""
+    return {task: file_sha256(folder / POLICY_FILE)[:12] for task, folder in folders.items()}
+
+
 def evaluate_job(job: tuple[Path, Profile, str, bool, list[EpisodeKey]]) -> list[dict[str, Any]]:
     """One parallel evaluation job (a worker process or a Ray task): (the workspace folder, the profile, the
     method's name, zero-shot, its episode keys) -> their records; the method's policies are loaded here."""
@@ -95,8 +100,7 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
     if method.variant is not None:
         policies, tracker_factory, lnet_version = load_method(profile, method, zero_shot)
         folders = policy_folders(method, policy_root(profile, zero_shot))
-        played_by = {"policies": {task: file_sha256(folder / POLICY_FILE)[:12] for task, folder in folders.items()},
-                     "lnet_version": lnet_version}
+        played_by = {"policies": policy_digests(folders), "lnet_version": lnet_version}
         train_steps = {task: json.loads((folder / "summary.json").read_text())["steps"]
                        for task, folder in folders.items()}
         policy_arena = read_signature(folders["pick"] / "meta.json").arena
@@ -114,7 +118,8 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
            "arena": arena_label(sim.arena), "policy_arena": arena_label(policy_arena), "n_objects": sim.n_objects,
            "seeds": protocol.seeds, "episodes_per_seed": protocol.episodes, "train_steps": train_steps,
            "metrics": metric_summaries(records, protocol.bootstrap_resamples), "profile": profile_name,
-           "wall_seconds": round(time.perf_counter() - started, 1), "workers": protocol.workers}
+           "wall_seconds": round(time.perf_counter() - started, 1), "workers": protocol.workers,
+           "played_by": played_by}
     write_json(paths.RESULTS_CARD / "rows" / f"{name}.json", row)
     return row
 
@@ -146,6 +151,7 @@ def collect_results(profile_name: str) -> Path:
     if existing.get("profile") != profile_name:
         existing = {"profile": profile_name, "rows": []}
     merged = merge_rows(existing["rows"], [r for r in rows if r.get("profile") == profile_name])
+    merged = [{**row, "stale": stale(row, profile_name)} for row in merged]
     results = {"profile": profile_name, "row_keys": list(ROW_KEYS), "rows": merged,
                "localisation": localisation(workspaces, profile_name),
                "compute": update_compute(paths.RESULTS_CARD / "compute.json", profile_name)}
@@ -154,15 +160,37 @@ def collect_results(profile_name: str) -> Path:
     return path
 
 
+def lnet_card(workspace: Path, profile_name: str) -> Path:
+    """The folder of the L-Net the L-Net rows of ``workspace`` observe through: the setting's own, or the main one
+    where the setting says ``lnet_from_main`` (and for the main workspace, ".")."""
+    setting = settings.setting_profile(workspace.name, profile_name).setting if workspace != Path(".") else None
+    own = setting is not None and not setting.lnet_from_main
+    return workspace / paths.LNET_CARD if own else paths.LNET_CARD
+
+
+def stale(row: dict[str, Any], profile_name: str) -> bool:
+    """Whether ``row`` was played by other policies or through another L-Net than the ones committed now: an L-Net
+    row whose ``lnet_version`` is not the identity of its workspace's L-Net (``lnet_card``; a row from before rows
+    recorded it counts as stale), or a row whose recorded policy digests differ from its policy files'."""
+    from mor.lnet.runtime import checkpoint_identity  # noqa: PLC0415 - torch only where needed
+
+    method, workspace = method_spec(row["method"]), Path(row.get("workspace", "."))
+    played_by = row.get("played_by") or {}
+    if method.uses_lnet and played_by.get("lnet_version") != checkpoint_identity(
+            lnet_card(workspace, profile_name) / "model.pt"):
+        return True
+    if not played_by.get("policies"):
+        return False
+    root = paths.POLICY_CARD if is_zero_shot(row) else workspace / paths.POLICY_CARD
+    return played_by["policies"] != policy_digests(policy_folders(method, root))
+
+
 def localisation(workspaces: list[Path], profile_name: str) -> dict[str, dict[str, Any]]:
-    """workspace -> ``localisation_headline`` of the L-Net its L-Net rows observed through (the main one where the
-    setting says ``lnet_from_main``) and that metrics file's path; workspaces whose L-Net has no metrics are left
-    out."""
+    """workspace -> ``localisation_headline`` of the L-Net its L-Net rows observed through (``lnet_card``) and that
+    metrics file's path; workspaces whose L-Net has no metrics are left out."""
     found = {}
     for workspace in workspaces:
-        setting = settings.setting_profile(workspace.name, profile_name).setting if workspace != Path(".") else None
-        own = setting is not None and not setting.lnet_from_main
-        metrics = (workspace / paths.LNET_CARD if own else paths.LNET_CARD) / "metrics.json"
+        metrics = lnet_card(workspace, profile_name) / "metrics.json"
         if metrics.is_file():
             found[workspace.as_posix()] = {**localisation_headline(json.loads(metrics.read_text())),
                                            "file": metrics.as_posix()}

@@ -120,6 +120,14 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     assert localisation["settings/objects_2"]["file"] == "cards/lnet/metrics.json"  # lnet_from_main
     missing = CliRunner().invoke(app, ["eval", "tables", "--table", "3"])
     assert missing.exit_code == 2 and "mor --setting polygon eval run --method baseline_delta_pose" in missing.output
+    assert not any(r["stale"] for r in rows)
+    # Another main L-Net committed (here: the polygon's): every row played through the main L-Net is now stale.
+    shutil.copyfile(workspace / "settings/polygon/cards/lnet/model.pt", workspace / "cards/lnet/model.pt")
+    _run("eval", "results", "--profile", "tiny")
+    rows = json.loads((workspace / "cards/results/results.json").read_text())["rows"]
+    assert {(r["method"], r["arena"], r["n_objects"]) for r in rows if r["stale"]} == {
+        ("lnet", "rect", 3), ("lnet_no_uncertainty", "rect", 3), ("lnet_nearest_rule", "rect", 3), ("lnet", "rect", 2)}
+    assert "| Ours: policy + uncertainty (lnet) † |" in (workspace / "cards/results/README.md").read_text()
 
 
 def test_validate_without_a_manifest_is_one_clear_line(workspace: Path) -> None:

@@ -180,7 +180,13 @@ def table_markdown(spec: TableSpec, rows: list[dict[str, Any]]) -> str:
         for k, metric in enumerate(METRIC_NAMES):
             ours, theirs = row["metrics"].get(metric), line.paper[k] if line.paper else None
             cells.append(f"{_cell(ours)}{_beats(ours, theirs, metric)} | {_paper_cell(theirs)}")
-        lines.append(f"| {row_label(line, row)} | " + " | ".join(cells) + " |")
+        lines.append(f"| {row_label(line, row)}{' †' if row.get('stale') else ''} | " + " | ".join(cells) + " |")
+    stale = [line for line in spec.rows if (row := find_row(rows, line.match)) is not None and row.get("stale")]
+    if stale:
+        lines.append("")
+        lines.append("† Played by other policies or through another L-Net than the ones committed now (the "
+                     "row's `played_by` in results.json); to re-run: " + "; ".join(
+                         f"{line.label} (`{line.command}`)" for line in stale) + ".")
     missing = missing_rows(spec, rows)
     if missing:
         lines.append("")

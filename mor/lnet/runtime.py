@@ -170,6 +170,16 @@ def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str
     saved = load_checkpoint(path, expected or {}, device)
     version = str(saved["dataset_version"])
     calibration = read_calibration(path.parent / CALIBRATION_FILE, version) if calibrated else Calibration()
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
     return LNetRunner(model_from_checkpoint(saved, device), calibration, int(saved["image_size"]), version, device,
-                      digest, compiled)
+                      _digest(path), compiled)
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:12]
+
+
+def checkpoint_identity(path: Path) -> str:
+    """``LNetRunner.identity`` of the checkpoint at ``path`` without building the model: what a policy trained or
+    a row evaluated through it records as ``lnet_version``."""
+    saved = load_checkpoint(Path(path), {}, "cpu")
+    return f"{saved['dataset_version']}-{_digest(path)}"

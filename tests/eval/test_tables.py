@@ -35,6 +35,15 @@ def test_a_table_with_rows_missing_names_them_and_the_commands() -> None:
     assert "Not yet run: Policy w/o uncertainty" in table_markdown(TABLES[2], [_row("gt_pose", 0.9)])
 
 
+def test_a_stale_row_is_marked_with_the_command_that_re_runs_it() -> None:
+    rows = [_row("gt_pose", 0.9), {**_row("lnet", 0.2), "stale": True}, _row("lnet_no_uncertainty", 0.1)]
+    table = table_markdown(TABLES[2], rows)
+    assert "(lnet) † |" in next(line for line in table.splitlines() if line.startswith("| Ours"))
+    assert "† Played by other policies or through another L-Net" in table
+    assert "(`mor eval run --method lnet`)" in table and "lnet_no_uncertainty`" not in table.split("†")[-1]
+    assert "†" not in table_markdown(TABLES[2], [_row("gt_pose", 0.9)])
+
+
 def test_the_policy_card_compares_with_and_without_uncertainty_by_their_intervals() -> None:
     from mor.eval.policy_card import uncertainty_comparison
 
