@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 from mor.config import Profile
-from mor.data.manifest import file_sha256
 from mor.data.parallel import unordered_map
 from mor.errors import ConfigError
 from mor.eval.card import write_results_card
@@ -72,8 +71,10 @@ def policy_folders(method: MethodSpec, root: Path) -> dict[str, Path]:
 
 
 def policy_digests(folders: dict[str, Path]) -> dict[str, str]:
-    """task -> the first 12 hex digits of the SHA-256 of the policy file in its folder (``policy_folders``)."""
-    return {task: file_sha256(folder / POLICY_FILE)[:12] for task, folder in folders.items()}
+    """task -> the digest (``mor.lnet.runtime.file_digest``) of the policy file in its folder (``policy_folders``)."""
+    from mor.lnet.runtime import file_digest  # noqa: PLC0415 - torch only where needed
+
+    return {task: file_digest(folder / POLICY_FILE) for task, folder in folders.items()}
 
 
 def evaluate_job(job: tuple[Path, Profile, str, bool, list[EpisodeKey]]) -> list[dict[str, Any]]:

@@ -171,10 +171,12 @@ def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str
     version = str(saved["dataset_version"])
     calibration = read_calibration(path.parent / CALIBRATION_FILE, version) if calibrated else Calibration()
     return LNetRunner(model_from_checkpoint(saved, device), calibration, int(saved["image_size"]), version, device,
-                      _digest(path), compiled)
+                      file_digest(path), compiled)
 
 
-def _digest(path: Path) -> str:
+def file_digest(path: Path) -> str:
+    """The first 12 hex digits of the SHA-256 of the file at ``path`` (how checkpoints and policies are named in
+    ``lnet_version`` and ``played_by``)."""
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:12]
 
 
@@ -182,4 +184,4 @@ def checkpoint_identity(path: Path) -> str:
     """``LNetRunner.identity`` of the checkpoint at ``path`` without building the model: what a policy trained or
     a row evaluated through it records as ``lnet_version``."""
     saved = load_checkpoint(Path(path), {}, "cpu")
-    return f"{saved['dataset_version']}-{_digest(path)}"
+    return f"{saved['dataset_version']}-{file_digest(path)}"
