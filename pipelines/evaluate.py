@@ -7,6 +7,7 @@ import json
 import os
 import time
 from collections.abc import Callable, Iterator
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -152,7 +153,8 @@ def collect_results(profile_name: str) -> Path:
     if existing.get("profile") != profile_name:
         existing = {"profile": profile_name, "rows": []}
     merged = merge_rows(existing["rows"], [r for r in rows if r.get("profile") == profile_name])
-    merged = [{**row, "stale": stale(row, profile_name)} for row in merged]
+    identity = cache(_identity)  # this call's: a card changed since an earlier call is read again
+    merged = [{**row, "stale": stale(row, profile_name, identity)} for row in merged]
     results = {"profile": profile_name, "row_keys": list(ROW_KEYS), "rows": merged,
                "localisation": localisation(workspaces, profile_name),
                "compute": update_compute(paths.RESULTS_CARD / "compute.json", profile_name)}
@@ -169,16 +171,20 @@ def lnet_card(workspace: Path, profile_name: str) -> Path:
     return workspace / paths.LNET_CARD if own else paths.LNET_CARD
 
 
-def stale(row: dict[str, Any], profile_name: str) -> bool:
+def _identity(card: Path) -> str:
+    """The identity of the L-Net in ``card`` (``collect_results`` reads each card's checkpoint once per call)."""
+    from mor.lnet.runtime import checkpoint_identity  # noqa: PLC0415 - torch only where needed
+
+    return checkpoint_identity(card / "model.pt")
+
+
+def stale(row: dict[str, Any], profile_name: str, identity: Callable[[Path], str] = _identity) -> bool:
     """Whether ``row`` was played by other policies or through another L-Net than the ones committed now: an L-Net
     row whose ``lnet_version`` is not the identity of its workspace's L-Net (``lnet_card``; a row from before rows
     recorded it counts as stale), or a row whose recorded policy digests differ from its policy files'."""
-    from mor.lnet.runtime import checkpoint_identity  # noqa: PLC0415 - torch only where needed
-
     method, workspace = method_spec(row["method"]), Path(row.get("workspace", "."))
     played_by = row.get("played_by") or {}
-    if method.uses_lnet and played_by.get("lnet_version") != checkpoint_identity(
-            lnet_card(workspace, profile_name) / "model.pt"):
+    if method.uses_lnet and played_by.get("lnet_version") != identity(lnet_card(workspace, profile_name)):
         return True
     if not played_by.get("policies"):
         return False
