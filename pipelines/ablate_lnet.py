@@ -23,14 +23,16 @@ REPORTED = ("nll", "agent_position_error_m", "heading_error_deg", "object_positi
 
 def run(profile: Profile, study: str, steps: int, episodes: int) -> dict[str, Any]:
     """Train each variant of ``study`` for ``steps`` steps (same seed, data and other parameters), calibrate each
-    on validation, score each on the first ``episodes`` test episodes; writes ``<ABLATION>/<study>/results.json``
+    on validation, score each on the first ``episodes`` test episodes (the filter variants tracked with the profile's
+    ``lnet.data_association``); writes ``<ABLATION>/<study>/results.json``
     and ``since_seen.png`` (median object error against frames since last seen, one line per variant)."""
     if study not in ABLATIONS:
         raise MorError(f"--study: unknown study {study!r}; choose one of {', '.join(ABLATIONS)}")
     version = manifest_version(read_manifest(paths.MANIFEST))
     device = pick_device()
     base = profile.lnet.train.model_copy(update={"max_steps": steps, "patience": 10**6})
-    results: dict[str, Any] = {"study": study, "steps": steps, "test_episodes": episodes, "dataset_version": version}
+    results: dict[str, Any] = {"study": study, "steps": steps, "test_episodes": episodes, "dataset_version": version,
+                               "data_association": profile.lnet.data_association}
     for name, overrides in ABLATIONS[study].items():
         params = base.model_copy(update={k: v for k, v in overrides.items() if k in TrainParams.model_fields})
         config = profile.lnet.model.model_copy(update={k: v for k, v in overrides.items()
@@ -38,6 +40,7 @@ def run(profile: Profile, study: str, steps: int, episodes: int) -> dict[str, An
         out = ABLATION / study / name
         summary = train(config, params, paths.LEROBOT / "train", paths.LEROBOT / "validation", out, version, device)
         model = load_lnet(out / BEST, device, signature(config, version, summary["image_size"]), calibrated=False).model
+        model.use_data_association(profile.lnet.data_association and config.tracker == "filter")
         calibration = fit_calibration(predict(model, paths.LEROBOT / "validation", episodes, device))
         scored = metrics(calibration.apply(predict(model, paths.LEROBOT / "test", episodes, device)))
         results[name] = {key: scored[key] for key in REPORTED}

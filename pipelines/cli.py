@@ -427,7 +427,8 @@ def bench_lnet(
     result = benchmark_lnet(config.lnet.model, config.sim.image_size, [1, 64], repeats)
     for name, entry in result["results"].items():
         typer.echo(f"{name}: {entry['frames_per_s']:.0f} frames/s")
-    streaming = result["streaming"] = benchmark_streaming(config.lnet.model, config.sim, n_envs, steps, repeats)
+    streaming = result["streaming"] = benchmark_streaming(config.lnet.model, config.sim, n_envs, steps, repeats,
+                                                          data_association=config.lnet.data_association)
     typer.echo(f"streaming at batch {n_envs}: L-Net {streaming['lnet_frames_per_s']:.0f} frames/s, environments "
                f"{streaming['env_frames_per_s']:.0f} frames/s, ratio {streaming['lnet_over_env']:.2f}")
     fused = streaming["compiled"]

@@ -32,7 +32,7 @@ def lnet_runner(variant: Variant, profile: Profile) -> Any:
 
     from_main = profile.setting is not None and profile.setting.lnet_from_main
     return load_lnet((paths.MAIN / paths.LNET_CARD if from_main else paths.LNET_CARD) / "model.pt",
-                     compiled=profile.lnet.compile_step)
+                     compiled=profile.lnet.compile_step, data_association=profile.lnet.data_association)
 
 
 def starting_policy(profile: Profile, variant: Variant, task: Task) -> Path | None:

@@ -122,7 +122,8 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     assert missing.exit_code == 2 and "mor --setting polygon eval run --method baseline_delta_pose" in missing.output
     assert not any(r["stale"] for r in rows)
     # Another main L-Net committed (here: the polygon's): every row played through the main L-Net is now stale.
-    shutil.copyfile(workspace / "settings/polygon/cards/lnet/model.pt", workspace / "cards/lnet/model.pt")
+    for name in ("model.pt", "calibration.json"):
+        shutil.copyfile(workspace / "settings/polygon/cards/lnet" / name, workspace / "cards/lnet" / name)
     _run("eval", "results", "--profile", "tiny")
     rows = json.loads((workspace / "cards/results/results.json").read_text())["rows"]
     assert {(r["method"], r["arena"], r["n_objects"]) for r in rows if r["stale"]} == {

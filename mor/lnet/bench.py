@@ -66,16 +66,18 @@ def benchmark_lnet(config: LNetConfig, image_size: int, batch_sizes: list[int], 
 
 
 def benchmark_streaming(config: LNetConfig, sim: SimConfig, n_envs: int, steps: int, repeats: int,
-                        seed: int = 0, compiled: bool = True) -> dict[str, Any]:
+                        seed: int = 0, compiled: bool = True, data_association: bool = False) -> dict[str, Any]:
     """The environments' rendered steps and the L-Net's streaming step over the same ``n_envs`` envs (random
     actions, resets included): median frames/s of each over ``repeats`` runs of ``steps`` vector steps, and
     ``lnet_over_env`` = L-Net frames/s / environment frames/s (>= 1: the L-Net is not the bottleneck).
 
     The step runs eagerly and, with ``compiled``, also through ``torch.compile`` (same weights, same frames, timed
     separately in the same loop): ``compiled`` holds its frames/s, ratio, runs, the largest difference of its
-    estimates from the eager step's (headings wrapped), and the warm-up run's seconds (the compilation)."""
+    estimates from the eager step's (headings wrapped), and the warm-up run's seconds (the compilation).
+    data_association: the filter tracks with it (``mor.lnet.filter``), as the profile's policy stages do."""
     envs = [gym.make(STREAMING_ENV, **sim.model_dump()) for _ in range(n_envs)]
     model = LNet(config)
+    model.use_data_association(data_association)
     runners = {"eager": LNetRunner(model, Calibration(), sim.image_size, "benchmark")}
     if compiled:
         runners["compiled"] = LNetRunner(model, Calibration(), sim.image_size, "benchmark", compiled=True)
@@ -123,7 +125,7 @@ def benchmark_streaming(config: LNetConfig, sim: SimConfig, n_envs: int, steps: 
               "env_frames_per_s": env_rate, "lnet_frames_per_s": rates["eager"],
               "lnet_over_env": rates["eager"] / env_rate, "runs_env": env_rates, "runs_lnet": lnet_rates["eager"],
               "torch_threads": torch.get_num_threads(), "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS"),
-              "sim": sim.model_dump()}
+              "data_association": data_association, "sim": sim.model_dump()}
     if compiled:
         result["compiled"] = {"lnet_frames_per_s": rates["compiled"], "lnet_over_env": rates["compiled"] / env_rate,
                               "over_eager": rates["compiled"] / rates["eager"], "runs_lnet": lnet_rates["compiled"],

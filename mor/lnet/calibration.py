@@ -1,5 +1,6 @@
 """The calibration of the L-Net's stated uncertainty: three multipliers, fitted on validation (``mor.lnet.evaluate``)
-and stored as ``calibration.json`` beside the checkpoint they belong to."""
+for one tracking rule (with or without the filter's data association, which it records), and stored as
+``calibration.json`` beside the checkpoint they belong to."""
 
 from __future__ import annotations
 
@@ -16,11 +17,13 @@ _T = TypeVar("_T")
 
 @dataclass(frozen=True)
 class Calibration:
-    """Multipliers of the stated standard deviations (agent, objects) and of the heading concentration."""
+    """Multipliers of the stated standard deviations (agent, objects) and of the heading concentration, and whether
+    they were fitted (and so must be used) with the filter's data association."""
 
     agent_scale: float = 1.0
     object_scale: float = 1.0
     kappa_scale: float = 1.0
+    data_association: bool = False
 
     def apply(self, estimates: _T) -> _T:
         """A copy of ``estimates`` (any dataclass with ``agent_tril``, ``object_tril`` and ``kappa``) with the
@@ -30,11 +33,15 @@ class Calibration:
 
 
 def read_calibration(path: Path, dataset_version: str | None = None) -> Calibration:
-    """The scales in the JSON file at ``path`` (written by ``mor calibrate-lnet``); one clear error if unusable,
-    or if it records a dataset version other than ``dataset_version`` (the checkpoint's)."""
+    """The scales in the JSON file at ``path`` (written by ``mor calibrate-lnet``; a file without
+    ``data_association`` predates the rule and was fitted without it); one clear error if unusable, or if it
+    records a dataset version other than ``dataset_version`` (the checkpoint's)."""
     try:
         values = json.loads(Path(path).read_text())
-        calibration = Calibration(*(float(values[key]) for key in ("agent_scale", "object_scale", "kappa_scale")))
+        calibration = Calibration(*(float(values[key]) for key in ("agent_scale", "object_scale", "kappa_scale")),
+                                  data_association=values.get("data_association", False))
+        if not isinstance(calibration.data_association, bool):
+            raise TypeError(f"data_association must be true or false, got {calibration.data_association!r}")
     except FileNotFoundError:
         raise MorError(f"{path}: no calibration beside the checkpoint; run mor calibrate-lnet") from None
     except (ValueError, KeyError, TypeError) as error:

@@ -104,6 +104,20 @@ def ablation_table(results: dict[str, Any]) -> list[str]:
     return rows
 
 
+def tracking_rule_table(rules: dict[str, dict[str, Any]]) -> list[str]:
+    """One row per tracking rule of ``calibration.json``'s ``tracking_rules``: errors, NLL and coverage on
+    validation after that rule's own calibration."""
+    rows = ["| rule | objects seen earlier, median (m) | in view, median (m) | agent, median (m) | object NLL | "
+            "objects seen earlier, 1σ / 2σ / 3σ | objects σ × |", "| --- | --- | --- | --- | --- | --- | --- |"]
+    for name, rule in rules.items():
+        r = rule["validation_after"]
+        coverage = " / ".join(f"{r['coverage_objects_seen'][f'{k}sigma']:.3f}" for k in (1, 2, 3))
+        rows.append(f"| {name.replace('_', ' ')} | {r['objects_seen_median_m']:.3f} | "
+                    f"{r['objects_visible_median_m']:.3f} | {r['agent_median_m']:.3f} | {r['nll_objects']:.3f} | "
+                    f"{coverage} | {rule['object_scale']:.3f} |")
+    return rows
+
+
 def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibration: dict[str, Any],
                       train_summary: dict[str, Any], figures: dict[str, str],
                       ablation: dict[str, Any] | None = None) -> str:
@@ -131,6 +145,9 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
            "learned from the previous action corrected by the PoseNet's fix, and per object a belief that stays on "
            "the floor, follows the agent while held, lands 1.5 m ahead on a drop, and is updated by the PoseNet's "
            "measurement weighted by its predicted visibility behind a Mahalanobis gate.")
+        + (" Whole episodes are tracked with data association: a measurement that two slots claim (the PoseNet "
+           "confuses objects of one colour) is shared by how well each belief explains it, and a doubtful update "
+           "widens the belief (see 'Tracking rule' below)." if calibration.get("data_association") else "")
         + (" The PoseNet has a visibility head (BCE) and its ego object NLL counts only frames where the object "
            "is visible." if params["model"].get("visibility") else ""), "",
         f"- Dataset version: `{metrics['dataset_version']}`; test split: {before['episodes']} episodes, "
@@ -184,9 +201,16 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
     lines += [
         f"![error against time since seen]({figures['since_seen']})", "",
     ]
+    if calibration.get("tracking_rules"):
+        lines += ["## Tracking rule: with and without data association (validation, each calibrated for itself)", "",
+                  "The same trained weights; `mor calibrate-lnet` tracks the validation episodes both ways, fits "
+                  "the scales for each, and keeps the profile's `lnet.data_association`.", "",
+                  *tracking_rule_table(calibration["tracking_rules"]), ""]
     if ablation:
+        rule = ("the filter variants tracked with data association" if ablation.get("data_association") else
+                "tracked without data association")
         lines += [f"## Ablation: tracker and visibility loss at an equal budget ({ablation['steps']} steps each, "
-                  f"first {ablation['test_episodes']} test episodes, after calibration)", "",
+                  f"first {ablation['test_episodes']} test episodes, after calibration, {rule})", "",
                   *ablation_table(ablation), "", f"![ablation]({figures['ablation']})", ""]
     lines += [
         "## What the estimates look like", "",

@@ -9,6 +9,13 @@ moved into the world frame with the estimated agent pose, weighted by the predic
 Mahalanobis gate. Everything is a torch expression, so the whole belief is trained with the NLL end to end
 (as backprop Kalman filters: Haarnoja et al. 2016; Kloss et al. 2021).
 
+``data_association`` (a tracking-time rule, off in training; ``lnet.data_association``, recorded in the
+calibration): the PoseNet confuses objects of one colour (its false "visible" frames are mostly a same-coloured
+object in view), so a slot's measurement that coincides with another slot's is shared between them by how well
+each belief explains it, and every weighted update keeps the spread of its two outcomes in the covariance (the
+probabilistic data association filter's covariance, Bar-Shalom et al. 2009), so a doubtful update widens the
+belief instead of shrinking it onto a possibly wrong place.
+
 Shapes: B episodes, K object slots. Positions in metres, headings in radians; the heading's belief is a Gaussian
 (mean, variance) on the circle, reported as a von Mises with kappa = 1 / variance.
 """
@@ -66,30 +73,69 @@ def _wrap(angle: torch.Tensor) -> torch.Tensor:
     return torch.atan2(torch.sin(angle), torch.cos(angle))
 
 
+def _squared_mahalanobis(difference: torch.Tensor, inverse: torch.Tensor) -> torch.Tensor:
+    """d^T inverse d of differences (..., 2) under inverse covariances (..., 2, 2) -> (...)."""
+    return (difference.unsqueeze(-2) @ inverse @ difference.unsqueeze(-1))[..., 0, 0]
+
+
 def _kalman(mean: torch.Tensor, cov: torch.Tensor, z: torch.Tensor, noise: torch.Tensor,
-            weight: torch.Tensor | None = None, gated: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+            weight: torch.Tensor | None = None, gated: bool = False, spread: bool = False
+            ) -> tuple[torch.Tensor, torch.Tensor]:
     """A Kalman update of N(mean, cov) by a direct measurement z ~ N(x, noise). The gain is scaled by ``weight``
     (in [0, 1]; None: 1) and, when ``gated``, by a soft gate that drops innovations beyond ``GATE`` (Mahalanobis^2
-    under cov + noise). Returns (mean, cov); (1 - w K) cov stays positive semi-definite for w in [0, 1]."""
+    under cov + noise). ``spread``: the covariance of the mixture "updated with probability w, else not" (adds
+    w (1 - w) (K v)(K v)^T, v the innovation). Returns (mean, cov); (1 - w K) cov stays positive semi-definite for
+    w in [0, 1]."""
     innovation = z - mean
     s_inv = _inverse(cov + noise)
     gain = cov @ s_inv
     if gated:
-        d2 = (innovation.unsqueeze(-2) @ s_inv @ innovation.unsqueeze(-1))[..., 0, 0]
+        d2 = _squared_mahalanobis(innovation, s_inv)
         gate = torch.sigmoid(_GATE_SHARPNESS * (GATE - d2))
         weight = gate if weight is None else gate * weight
-    if weight is not None:
-        gain = gain * weight[..., None, None]
-    mean = mean + (gain @ innovation.unsqueeze(-1))[..., 0]
-    return mean, _symmetric(cov - gain @ cov)
+    full_step = (gain @ innovation.unsqueeze(-1))[..., 0]
+    if weight is None:
+        return mean + full_step, _symmetric(cov - gain @ cov)
+    cov = cov - weight[..., None, None] * gain @ cov
+    if spread:
+        cov = cov + (weight * (1.0 - weight))[..., None, None] * _outer(full_step)
+    return mean + weight[..., None] * full_step, _symmetric(cov)
+
+
+def _log_density(x: torch.Tensor, mean: torch.Tensor, cov: torch.Tensor) -> torch.Tensor:
+    """log N(x; mean, cov) of 2-D points (..., 2) under covariances (..., 2, 2)."""
+    d2 = _squared_mahalanobis(x - mean, _inverse(cov))
+    det = (cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]).clamp(min=_EPS * _EPS)
+    return -0.5 * d2 - 0.5 * torch.log(det) - math.log(2.0 * math.pi)
+
+
+def associate(weight: torch.Tensor, measured: torch.Tensor, noise: torch.Tensor, objects: torch.Tensor,
+              object_cov: torch.Tensor) -> torch.Tensor:
+    """The weight of each slot's measurement once shared with the other slots that claim the same thing.
+
+    weight (B, K) each measurement's probability of being of its own object (the predicted visibility); measured
+    (B, K, 2) and noise (B, K, 2, 2) the measurements in the world frame; objects (B, K, 2) and object_cov
+    (B, K, 2, 2) the beliefs. Slot j claims slot k's measurement z_k as much as j's own measurement coincides with
+    it, c_kj = weight_j exp(-d^2 / 2) (d^2: Mahalanobis^2 of z_k - z_j under both noises); the measurement is then
+    k's in proportion to how well k's belief explains it against the claimants':
+    weight_k L_kk / (L_kk + sum_j c_kj L_kj), L_kj = N(z_k; mean_j, cov_j + noise_k). Returns (B, K) in [0, 1].
+    """
+    z, r = measured.unsqueeze(2), noise.unsqueeze(2)                                       # (B, K, 1, ...)
+    explained = _log_density(z, objects.unsqueeze(1), object_cov.unsqueeze(1) + r)        # (B, K, K): z_k | j
+    coincide = torch.exp(-0.5 * _squared_mahalanobis(z - measured.unsqueeze(1), _inverse(r + noise.unsqueeze(1))))
+    others = 1.0 - torch.eye(weight.shape[-1], dtype=weight.dtype, device=weight.device)
+    claims = weight.unsqueeze(1) * coincide * others                                       # (B, K, K): c_kj
+    own = torch.diagonal(explained, dim1=1, dim2=2).unsqueeze(-1)
+    return weight / (1.0 + (claims * torch.exp(explained - own)).sum(-1))
 
 
 class BeliefFilter(nn.Module):
     """The learned parameters of the filter and one step of it (see the module docstring)."""
 
-    def __init__(self, n_slots: int) -> None:
+    def __init__(self, n_slots: int, data_association: bool = False) -> None:
         super().__init__()
         self.n_slots = n_slots
+        self.data_association = data_association  # a tracking-time rule, not a weight (module docstring)
         actions = N_ACTIONS + 1  # the last row: no previous action (an episode's first frame)
         self.forward_distance = nn.Parameter(torch.zeros(actions))
         self.turn = nn.Parameter(torch.zeros(actions))
@@ -166,5 +212,8 @@ class BeliefFilter(nn.Module):
         noise = (scale[2] * rotation @ ego_cov @ rotation.transpose(-1, -2) + agent_cov[:, None]
                  + heading_var[:, None, None, None] * _outer(jacobian))
         weight = (~is_held).to(objects.dtype) if visibility is None else visibility * ~is_held
-        objects, object_cov = _kalman(objects, object_cov, measured, noise, weight, gated=True)
+        if self.data_association:
+            weight = associate(weight, measured, noise, objects, object_cov)
+        objects, object_cov = _kalman(objects, object_cov, measured, noise, weight, gated=True,
+                                      spread=self.data_association)
         return agent, agent_cov, heading, heading_var, objects, object_cov, held

@@ -196,6 +196,14 @@ class LNet(nn.Module):
         else:
             self.filter = BeliefFilter(K)
 
+    def use_data_association(self, on: bool) -> None:
+        """Track with the filter's data association (``mor.lnet.filter``) or without; ``on`` with the LSTM tracker
+        is a ValueError."""
+        if self.config.tracker == "filter":
+            self.filter.data_association = on
+        elif on:
+            raise ValueError("data association needs the filter tracker; this model's tracker is the LSTM")
+
     @property
     def _batch_dim(self) -> int:
         return 1 if self.config.tracker == "lstm" else 0  # the LSTM's (h, c) are (layers, B, hidden)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 
 class LNetConfig(BaseModel):
@@ -84,6 +84,16 @@ class LNetParams(BaseModel):
     compile_step: bool = Field(False, description="the policy stages run the L-Net's streaming step through "
                                "torch.compile: about 1.3x faster on CPU (mor bench lnet), estimates equal up to "
                                "float rounding, about a minute to compile once per process (docs/performance.md)")
+    data_association: bool = Field(False, description="track whole episodes with the filter's data association "
+                                   "(mor.lnet.filter: a measurement two slots claim is shared by how well each belief "
+                                   "explains it, and doubtful updates widen the belief); a tracking-time rule, not "
+                                   "used in training, fitted and recorded by mor calibrate-lnet")
+
+    @model_validator(mode="after")
+    def _association_needs_the_filter(self) -> LNetParams:
+        if self.data_association and self.model.tracker != "filter":
+            raise ValueError("data_association: needs model.tracker: filter (the LSTM keeps no per-object belief)")
+        return self
 
 
 # `mor ablate-lnet --study NAME`: named variants of the profile's LNetConfig, trained and scored at equal budgets.

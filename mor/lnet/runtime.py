@@ -81,10 +81,8 @@ class LNetRunner:
 
     @property
     def identity(self) -> str:
-        """What a policy trained through this L-Net records (``lnet_version``): the dataset version and, for a
-        loaded checkpoint, the first 12 hex digits of its file's SHA-256 (another training run is another L-Net)."""
-        return self.dataset_version if self.checkpoint_digest is None else (
-            f"{self.dataset_version}-{self.checkpoint_digest}")
+        """What a policy trained through this L-Net records (``lnet_version``): ``lnet_identity``."""
+        return lnet_identity(self.dataset_version, self.checkpoint_digest, self.calibration)
 
     @property
     def config(self) -> LNetConfig:
@@ -159,19 +157,34 @@ class LNetRunner:
 
 
 def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str, Any] | None = None,
-              calibrated: bool = True, compiled: bool = False) -> LNetRunner:
+              calibrated: bool = True, compiled: bool = False, data_association: bool | None = None) -> LNetRunner:
     """The trained L-Net at ``path`` with the calibration stored beside it (``calibration.json``).
 
     expected: a ``mor.lnet.checkpoint.signature`` (or part of one) the checkpoint must match: another tracker,
     config, dataset version or image size is one clear error naming both sides. calibrated=False: identity scales
     (what the calibration stage itself needs). compiled: the streaming step through ``torch.compile``.
+    data_association: the tracking rule (``mor.lnet.filter``); None: the one the calibration was fitted for (none
+    when uncalibrated); given with a calibration fitted for the other rule, one clear error.
     """
     path = Path(path)
     saved = load_checkpoint(path, expected or {}, device)
     version = str(saved["dataset_version"])
-    calibration = read_calibration(path.parent / CALIBRATION_FILE, version) if calibrated else Calibration()
-    return LNetRunner(model_from_checkpoint(saved, device), calibration, int(saved["image_size"]), version, device,
-                      file_digest(path), compiled)
+    beside = path.parent / CALIBRATION_FILE
+    calibration = read_calibration(beside, version) if calibrated else Calibration(
+        data_association=bool(data_association))
+    if data_association is not None and data_association != calibration.data_association:
+        raise MorError(f"{beside}: fitted with data_association {calibration.data_association} but this run's is "
+                       f"{data_association} (lnet.data_association); run mor calibrate-lnet")
+    model = model_from_checkpoint(saved, device)
+    model.use_data_association(calibration.data_association)
+    return LNetRunner(model, calibration, int(saved["image_size"]), version, device, file_digest(path), compiled)
+
+
+def lnet_identity(dataset_version: str, checkpoint_digest: str | None, calibration: Calibration) -> str:
+    """The dataset version; for a loaded checkpoint, the first 12 hex digits of its file's SHA-256 (another training
+    run is another L-Net); and ``-associated`` when it tracks with the filter's data association (other estimates)."""
+    identity = dataset_version if checkpoint_digest is None else f"{dataset_version}-{checkpoint_digest}"
+    return f"{identity}-associated" if calibration.data_association else identity
 
 
 def file_digest(path: Path) -> str:
@@ -183,5 +196,9 @@ def file_digest(path: Path) -> str:
 def checkpoint_identity(path: Path) -> str:
     """``LNetRunner.identity`` of the checkpoint at ``path`` without building the model: what a policy trained or
     a row evaluated through it records as ``lnet_version``."""
-    saved = load_checkpoint(Path(path), {}, "cpu")
-    return f"{saved['dataset_version']}-{file_digest(path)}"
+    path = Path(path)
+    saved = load_checkpoint(path, {}, "cpu")
+    version = str(saved["dataset_version"])
+    beside = path.parent / CALIBRATION_FILE
+    return lnet_identity(version, file_digest(path), read_calibration(beside, version) if beside.is_file()
+                         else Calibration())

@@ -1,4 +1,5 @@
-"""The belief filter's rules on hand-made measurements: fix, held, drop, unseen, visibility weight, gate."""
+"""The belief filter's rules on hand-made measurements: fix, held, drop, unseen, visibility weight, gate,
+data association."""
 
 from __future__ import annotations
 
@@ -22,8 +23,8 @@ def _ego(points: list[tuple[float, float]]) -> tuple[torch.Tensor, torch.Tensor]
 
 
 @torch.no_grad()
-def _run(steps: list[dict]) -> list[tuple[torch.Tensor, ...]]:
-    belief = BeliefFilter(n_slots=2)
+def _run(steps: list[dict], data_association: bool = False) -> list[tuple[torch.Tensor, ...]]:
+    belief = BeliefFilter(n_slots=2, data_association=data_association)
     state = belief.initial_state(1)
     states = []
     for step in steps:
@@ -64,6 +65,28 @@ def test_an_outlier_far_outside_a_confident_belief_is_gated_out() -> None:
     outlier = {**seen, "ego": [(2.0, 2.5), (0.0, 0.0)]}
     _, after = _run([seen, outlier])
     torch.testing.assert_close(after[4][0, 0], torch.tensor([2.0, 0.0]), atol=2e-2, rtol=0)
+
+
+@pytest.mark.parametrize("data_association", [False, True])
+def test_a_measurement_another_tracked_slot_claims_goes_to_that_slot(data_association: bool) -> None:
+    # Slot 0 is tracked 2 m ahead. Then slot 1 (never seen) "sees" the same spot as slot 0 does: a same-coloured
+    # object confused for it. Associated, slot 0's confident belief explains it and slot 1 keeps (nearly) its prior.
+    tracked = {"agent": (0.0, 0.0, 0.0), "ego": [(2.0, 0.0), (0.0, 0.0)], "visible": [1.0, 0.0], "held": -1}
+    confused = {**tracked, "ego": [(2.0, 0.0), (2.0, 0.0)], "visible": [1.0, 0.9]}
+    _, after = _run([tracked, confused], data_association)
+    distance_from_prior = torch.linalg.norm(after[4][0, 1] - BeliefFilter(n_slots=2).initial_state(1)[4][0, 1])
+    assert (distance_from_prior < 0.2) == data_association  # without: pulled about 2 m to slot 0's object
+    torch.testing.assert_close(after[4][0, 0], torch.tensor([2.0, 0.0]), atol=2e-2, rtol=0)
+
+
+def test_a_doubtful_update_keeps_the_spread_of_its_outcomes_in_the_covariance() -> None:
+    half_seen = {"agent": (0.0, 0.0, 0.0), "ego": [(2.0, 0.0), (0.0, 0.0)], "visible": [0.5, 0.0], "held": -1}
+    (plain,), (associated,) = _run([half_seen]), _run([half_seen], data_association=True)
+    torch.testing.assert_close(plain[4], associated[4])  # the same mean (no other slot claims it)
+    # Halfway to the measurement either way; associated, the variance along the innovation (2 m along x, from the
+    # prior's centre) also holds the spread of "moved" and "not moved": 0.5 x 0.5 x (2 m)^2 = 1 m^2.
+    spread = associated[5][0, 0] - plain[5][0, 0]
+    torch.testing.assert_close(spread, torch.tensor([[1.0, 0.0], [0.0, 0.0]]), atol=1e-2, rtol=0)
 
 
 def test_cholesky_2x2_reproduces_the_covariance() -> None:

@@ -16,8 +16,8 @@ from mor.errors import MorError
 from mor.lnet.calibration import CALIBRATION_FILE, Calibration
 from mor.lnet.checkpoint import CheckpointMismatch, signature
 from mor.lnet.model import LNet
-from mor.lnet.params import LNetConfig
-from mor.lnet.runtime import LNetRunner, ObservationMismatch, load_lnet
+from mor.lnet.params import LNetConfig, LNetParams
+from mor.lnet.runtime import LNetRunner, ObservationMismatch, checkpoint_identity, load_lnet
 
 SMALL = LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)
 SIZE = 16
@@ -146,6 +146,25 @@ def test_the_committed_model_loads_with_one_call_and_checks_what_it_was_made_wit
     assert runner.identity.startswith(saved["dataset_version"] + "-") and other_runner.identity != runner.identity
 
 
+def test_the_tracking_rule_follows_the_calibration_and_a_mismatch_is_one_clear_error(tmp_path: Path) -> None:
+    config = SMALL.model_copy(update={"tracker": "filter", "visibility": True})
+    checkpoint = tmp_path / "model.pt"
+    torch.save({**signature(config, "v", SIZE), "model": LNet(config).state_dict()}, checkpoint)
+    scales = {"agent_scale": 1, "object_scale": 1, "kappa_scale": 1, "dataset_version": "v"}
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True}))
+    runner = load_lnet(checkpoint)
+    assert runner.model.filter.data_association and runner.identity.endswith("-associated")
+    assert checkpoint_identity(checkpoint) == runner.identity
+    with pytest.raises(MorError, match="fitted with data_association True but this run's is False"):
+        load_lnet(checkpoint, data_association=False)
+    assert not load_lnet(checkpoint, calibrated=False).model.filter.data_association
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps(scales))  # a file from before the rule: fitted without it
+    assert not load_lnet(checkpoint).model.filter.data_association
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": "yes"}))
+    with pytest.raises(MorError, match="data_association must be true or false"):
+        load_lnet(checkpoint)
+
+
 def test_the_lnet_benchmark_counts_the_multiply_adds_of_a_frame_and_of_its_encoder() -> None:
     from mor.lnet.bench import benchmark_lnet  # noqa: PLC0415
 
@@ -215,3 +234,9 @@ def test_story_picks_an_episode_with_a_pick_then_a_drop() -> None:
     episode = np.array([0] * 6 + [1] * 7)
     predictions = type("P", (), {"episode": episode, "held": held, "visible": visible})()
     assert story(predictions) == (1, [0, 1, 2, 3, 5, 6])
+
+
+def test_data_association_in_a_profile_needs_the_filter_tracker() -> None:
+    with pytest.raises(ValueError, match="data_association: needs model.tracker: filter"):
+        LNetParams(data_association=True)
+    assert LNetParams(model=LNetConfig(tracker="filter"), data_association=True).data_association
