@@ -34,6 +34,7 @@ from mor.sim.rules import DROP_DISTANCE, N_ACTIONS
 GATE = 9.21
 _GATE_SHARPNESS = 2.0
 _EPS = 1e-6
+_MAX_LOG_RATIO = 60.0  # exp(60) ~ 1e26: a claim this much better takes the measurement whole
 _LOG_PRIOR_STD = math.log(6.0 / math.sqrt(12.0))  # a uniform 6 m side: std 1.73 m (learned from there)
 
 #: The state: agent mean (B, 2), agent cov (B, 2, 2), heading (B,), heading variance (B,), object means (B, K, 2),
@@ -126,7 +127,9 @@ def associate(weight: torch.Tensor, measured: torch.Tensor, noise: torch.Tensor,
     others = 1.0 - torch.eye(weight.shape[-1], dtype=weight.dtype, device=weight.device)
     claims = weight.unsqueeze(1) * coincide * others                                       # (B, K, K): c_kj
     own = torch.diagonal(explained, dim1=1, dim2=2).unsqueeze(-1)
-    return weight / (1.0 + (claims * torch.exp(explained - own)).sum(-1))
+    # L_kj / L_kk, capped so that a belief that cannot explain z_k at all never overflows to inf (0 x inf = NaN)
+    ratio = torch.exp((explained - own).clamp(max=_MAX_LOG_RATIO))
+    return weight / (1.0 + (claims * ratio).sum(-1))
 
 
 class BeliefFilter(nn.Module):

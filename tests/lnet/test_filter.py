@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from mor.lnet.filter import BeliefFilter, cholesky_2x2
+from mor.lnet.filter import BeliefFilter, associate, cholesky_2x2
 from mor.sim.rules import DROP_DISTANCE
 
 TIGHT = 1e-3  # metres: a near-exact measurement
@@ -77,6 +77,15 @@ def test_a_measurement_another_tracked_slot_claims_goes_to_that_slot(data_associ
     distance_from_prior = torch.linalg.norm(after[4][0, 1] - BeliefFilter(n_slots=2).initial_state(1)[4][0, 1])
     assert (distance_from_prior < 0.2) == data_association  # without: pulled about 2 m to slot 0's object
     torch.testing.assert_close(after[4][0, 0], torch.tensor([2.0, 0.0]), atol=2e-2, rtol=0)
+
+
+def test_a_belief_that_cannot_explain_its_measurement_at_all_gives_no_nan() -> None:
+    # Slot 0's tight belief is 10 m from its measurement (log-likelihood about -25,000 below slot 1's); slot 1 does
+    # not claim it (not visible), so slot 0 keeps its whole weight instead of 0 x inf.
+    tight = 1e-3 * torch.eye(2).expand(1, 2, 2, 2)
+    weight = associate(torch.tensor([[1.0, 0.0]]), torch.zeros(1, 2, 2), tight, torch.tensor([[[10.0, 0.0],
+                                                                                             [0.0, 0.0]]]), tight)
+    torch.testing.assert_close(weight, torch.tensor([[1.0, 0.0]]))
 
 
 def test_a_doubtful_update_keeps_the_spread_of_its_outcomes_in_the_covariance() -> None:
