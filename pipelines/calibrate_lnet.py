@@ -11,7 +11,7 @@ from dataclasses import asdict, replace
 from typing import Any
 
 from mor.config import Profile
-from mor.lnet.calibration import Calibration
+from mor.lnet.calibration import Calibration, check_scales
 from mor.lnet.evaluate import Predictions, fit_calibration, metrics, predict
 from mor.lnet.runtime import LNetRunner
 from pipelines import paths
@@ -42,6 +42,7 @@ def run(profile: Profile) -> dict[str, Any]:
     rules = (chosen, not chosen) if runner.config.tracker == "filter" else (chosen,)
     fits = {rule: _fitted(runner, profile, rule) for rule in rules}
     predictions, calibration = fits[chosen]
+    check_scales(calibration, paths.LNET_CALIBRATION)
     payload = {**asdict(calibration), "dataset_version": runner.dataset_version,
                "fitted_on": {"split": "validation", "frames": int(len(predictions.frame))},
                "validation_before": metrics(predictions)["coverage"],

@@ -5,6 +5,7 @@ for one tracking rule (with or without the filter's data association, which it r
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TypeVar
@@ -51,6 +52,13 @@ def read_calibration(path: Path, dataset_version: str | None = None) -> Calibrat
     if dataset_version is not None and fitted_on is not None and fitted_on != dataset_version:
         raise MorError(f"{path}: calibration dataset_version is {fitted_on} but the checkpoint's is {dataset_version}; "
                        "run mor calibrate-lnet for this checkpoint")
-    if min(calibration.agent_scale, calibration.object_scale, calibration.kappa_scale) <= 0:
-        raise MorError(f"{path}: calibration scales must be positive, got {calibration}; run mor calibrate-lnet")
+    check_scales(calibration, path)
     return calibration
+
+
+def check_scales(calibration: Calibration, path: Path) -> None:
+    """One clear error unless every scale is a positive finite number (NaN estimates give NaN scales)."""
+    scales = (calibration.agent_scale, calibration.object_scale, calibration.kappa_scale)
+    if not all(math.isfinite(scale) and scale > 0 for scale in scales):
+        raise MorError(f"{path}: calibration scales must be positive and finite, got {calibration}; run mor "
+                       "calibrate-lnet (non-finite scales come from non-finite estimates on validation)")

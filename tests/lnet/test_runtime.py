@@ -163,6 +163,9 @@ def test_the_tracking_rule_follows_the_calibration_and_a_mismatch_is_one_clear_e
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": "yes"}))
     with pytest.raises(MorError, match="data_association must be true or false"):
         load_lnet(checkpoint)
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "object_scale": float("nan")}))
+    with pytest.raises(MorError, match="scales must be positive and finite"):
+        load_lnet(checkpoint)
 
 
 def test_the_lnet_benchmark_counts_the_multiply_adds_of_a_frame_and_of_its_encoder() -> None:
