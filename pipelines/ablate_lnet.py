@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from dataclasses import asdict
 from typing import Any
 
 from mor.config import Profile
 from mor.data.manifest import manifest_version, read_manifest
 from mor.errors import MorError
 from mor.lnet.checkpoint import signature
-from mor.lnet.evaluate import fit_calibration, metrics, predict
+from mor.lnet.evaluate import calibrate, frame_estimates, metrics, predict
 from mor.lnet.figures import write_since_seen
 from mor.lnet.params import ABLATIONS, TrainParams
 from mor.lnet.runtime import load_lnet
@@ -21,8 +22,10 @@ REPORTED = ("nll", "agent_position_error_m", "heading_error_deg", "object_positi
             "object_error_by_steps_since_seen", "coverage")
 
 
-def run(profile: Profile, study: str, steps: int, episodes: int) -> dict[str, Any]:
-    """Train each variant of ``study`` for ``steps`` steps (same seed, data and other parameters), calibrate each
+def run(profile: Profile, study: str, steps: int, episodes: int, pretrain_steps: int | None = None
+        ) -> dict[str, Any]:
+    """Train each variant of ``study`` for ``pretrain_steps`` PoseNet steps (None: the profile's) and ``steps``
+    window steps (same seed, data and other parameters), calibrate each
     on validation, score each on the first ``episodes`` test episodes (the filter variants tracked with the profile's
     ``lnet.data_association``); writes ``<ABLATION>/<study>/results.json``
     and ``since_seen.png`` (median object error against frames since last seen, one line per variant)."""
@@ -30,8 +33,9 @@ def run(profile: Profile, study: str, steps: int, episodes: int) -> dict[str, An
         raise MorError(f"--study: unknown study {study!r}; choose one of {', '.join(ABLATIONS)}")
     version = manifest_version(read_manifest(paths.MANIFEST))
     device = pick_device()
-    base = profile.lnet.train.model_copy(update={"max_steps": steps, "patience": 10**6})
-    results: dict[str, Any] = {"study": study, "steps": steps, "test_episodes": episodes, "dataset_version": version,
+    pretrain = profile.lnet.train.pretrain_steps if pretrain_steps is None else pretrain_steps
+    base = profile.lnet.train.model_copy(update={"max_steps": steps, "pretrain_steps": pretrain, "patience": 10**6})
+    results: dict[str, Any] = {"study": study, "steps": steps, "pretrain_steps": pretrain, "test_episodes": episodes, "dataset_version": version,
                                "data_association": profile.lnet.data_association}
     for name, overrides in ABLATIONS[study].items():
         params = base.model_copy(update={k: v for k, v in overrides.items() if k in TrainParams.model_fields})
@@ -41,14 +45,15 @@ def run(profile: Profile, study: str, steps: int, episodes: int) -> dict[str, An
         summary = train(config, params, paths.LEROBOT / "train", paths.LEROBOT / "validation", out, version, device)
         model = load_lnet(out / BEST, device, signature(config, version, summary["image_size"]), calibrated=False).model
         model.use_data_association(profile.lnet.data_association and config.tracker == "filter")
-        calibration = fit_calibration(predict(model, paths.LEROBOT / "validation", episodes, device))
-        scored = metrics(calibration.apply(predict(model, paths.LEROBOT / "test", episodes, device)))
+        _, calibration, _ = calibrate(model, frame_estimates(model, paths.LEROBOT / "validation", episodes, device))
+        test = predict(model, paths.LEROBOT / "test", episodes, device)
+        scored = metrics(calibration.apply(test, test.shared))
         results[name] = {key: scored[key] for key in REPORTED}
         results[name].update(best_validation_loss=summary["best_validation_loss"], train_seconds=summary["seconds"],
-                             overrides=overrides)
+                             overrides=overrides, calibration=asdict(calibration))
         write_json(ABLATION / study / "results.json", results)  # after each variant: a partial study is readable
     curves = {name: results[name]["object_error_by_steps_since_seen"] for name in ABLATIONS[study]}
-    title = f"L-Net ablation '{study}' at {steps} steps: object error vs time since seen (test)"
+    title = f"L-Net ablation '{study}' at {pretrain} + {steps} steps: object error vs time since seen (test)"
     write_since_seen(ABLATION / study / "since_seen.png", curves, title)
     # The committed copy, which the model card shows (outside cards/lnet, which the eval stage rewrites whole).
     write_json(paths.LNET_ABLATION_CARD / f"{study}.json", results)

@@ -1,30 +1,23 @@
 """Stage ``calibrate_lnet``: fit the uncertainty scales on the validation split, for the profile's tracking rule.
 
-With the filter tracker, both tracking rules (with and without data association) are fitted and scored on
-validation, side by side in ``tracking_rules``: the evidence for ``lnet.data_association`` (the model card's table).
+The PoseNet runs once over the validation episodes; the tracker is replayed on its estimates for every setting
+tried. With the filter tracker, both tracking rules (with and without data association) are calibrated (the
+measurement noise, then the scales: ``mor.lnet.evaluate.calibrate``) and scored on validation, side by side in
+``tracking_rules``: the evidence for ``lnet.data_association`` (the model card's table).
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict
 from typing import Any
 
 from mor.config import Profile
-from mor.lnet.calibration import Calibration, check_scales
-from mor.lnet.evaluate import Predictions, fit_calibration, metrics, predict
-from mor.lnet.runtime import LNetRunner
+from mor.lnet.calibration import check_scales
+from mor.lnet.evaluate import calibrate, frame_estimates, metrics
 from pipelines import paths
 from pipelines.io import write_json
 from pipelines.lnet_io import load_trained
-
-
-def _fitted(runner: LNetRunner, profile: Profile, data_association: bool) -> tuple[Predictions, Calibration]:
-    """Validation predictions with the given tracking rule and the calibration fitted on them."""
-    runner.model.use_data_association(data_association)
-    predictions = predict(runner.model, paths.LEROBOT / "validation", profile.lnet.calibration.max_episodes,
-                          runner.device)
-    return predictions, replace(fit_calibration(predictions), data_association=data_association)
 
 
 def _headline(scored: dict[str, Any]) -> dict[str, Any]:
@@ -38,18 +31,25 @@ def _headline(scored: dict[str, Any]) -> dict[str, Any]:
 def run(profile: Profile) -> dict[str, Any]:
     started = time.perf_counter()
     runner = load_trained(profile, paths.LNET / "model.pt", calibrated=False)
+    episodes = frame_estimates(runner.model, paths.LEROBOT / "validation", profile.lnet.calibration.max_episodes,
+                               runner.device)  # the PoseNet once; the tracker is replayed per rule and noise
     chosen = profile.lnet.data_association
-    rules = (chosen, not chosen) if runner.config.tracker == "filter" else (chosen,)
-    fits = {rule: _fitted(runner, profile, rule) for rule in rules}
-    predictions, calibration = fits[chosen]
+    rules = (not chosen, chosen) if runner.config.tracker == "filter" else (chosen,)  # the chosen one last: kept
+    fits = {}
+    for rule in rules:
+        runner.model.use_data_association(rule)
+        fits[rule] = calibrate(runner.model, episodes)
+    predictions, calibration, tried = fits[chosen]
     check_scales(calibration, paths.LNET_CALIBRATION)
+    after = {rule: metrics(fitted.apply(p, p.shared)) for rule, (p, fitted, _) in fits.items()}
     payload = {**asdict(calibration), "dataset_version": runner.dataset_version,
                "fitted_on": {"split": "validation", "frames": int(len(predictions.frame))},
+               "measurement_noise_nll": tried,
                "validation_before": metrics(predictions)["coverage"],
-               "validation_after": metrics(calibration.apply(predictions))["coverage"],
+               "validation_after": after[chosen]["coverage"],
                "tracking_rules": {("with" if rule else "without") + "_data_association": {
-                   **asdict(fitted), "validation_after": _headline(metrics(fitted.apply(rule_predictions)))}
-                   for rule, (rule_predictions, fitted) in fits.items()},
+                   **asdict(fitted), "validation_after": _headline(after[rule])}
+                   for rule, (_, fitted, _) in fits.items()},
                "seconds": round(time.perf_counter() - started, 1)}
     write_json(paths.LNET_CALIBRATION, payload)
     return payload

@@ -336,7 +336,9 @@ def ablate_lnet_command(
     study: Annotated[str, typer.Option(help="Which variants: actions (previous action as LSTM input or not), "
                                             "object_head (global MLP or class attention) or tracker (lstm or "
                                             "filter, with and without the visibility loss).")] = "actions",
-    steps: Annotated[int, typer.Option(min=1, help="Training steps per variant.")] = 300,
+    steps: Annotated[int, typer.Option(min=1, help="Window training steps per variant.")] = 300,
+    pretrain_steps: Annotated[int | None, typer.Option(min=0, help="PoseNet pretraining steps per variant (default: "
+                                                                    "the profile's).")] = None,
     episodes: Annotated[int, typer.Option(min=1, help="Validation/test episodes used to calibrate and score.")] = 100,
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
@@ -345,7 +347,7 @@ def ablate_lnet_command(
     from mor.lnet.params import ABLATIONS
     from pipelines import ablate_lnet
 
-    result = ablate_lnet.run(load_profile(profile, params), study, steps, episodes)
+    result = ablate_lnet.run(load_profile(profile, params), study, steps, episodes, pretrain_steps)
     for name in ABLATIONS[study]:
         m = result[name]
         typer.echo(f"{name}: agent {m['agent_position_error_m']['median']:.3f} m, heading "

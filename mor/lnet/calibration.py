@@ -1,6 +1,8 @@
-"""The calibration of the L-Net's stated uncertainty: three multipliers, fitted on validation (``mor.lnet.evaluate``)
-for one tracking rule (with or without the filter's data association, which it records), and stored as
-``calibration.json`` beside the checkpoint they belong to."""
+"""The calibration of the L-Net, fitted on validation (``mor.lnet.evaluate``) and stored as ``calibration.json``
+beside the checkpoint it belongs to: multipliers of the stated uncertainty (the agent's, the heading's, and the
+objects' in two groups: objects of a colour of their own and objects sharing their colour with another, which the
+PoseNet confuses), the tracking rule they were fitted for (the filter's data association), and the filter's
+measurement-noise multipliers for the two groups (``mor.lnet.filter``)."""
 
 from __future__ import annotations
 
@@ -8,7 +10,7 @@ import json
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from mor.errors import MorError
 
@@ -18,29 +20,43 @@ _T = TypeVar("_T")
 
 @dataclass(frozen=True)
 class Calibration:
-    """Multipliers of the stated standard deviations (agent, objects) and of the heading concentration, and whether
-    they were fitted (and so must be used) with the filter's data association."""
+    """Multipliers of the stated standard deviations (agent; objects of their own colour, ``object_scale``;
+    objects sharing their colour, ``shared_colour_scale``, None: the same as ``object_scale``) and of the heading
+    concentration; whether they were fitted (and so must be used) with the filter's data association; and the
+    filter's measurement-noise multipliers (own colour, shared colour) they were fitted with."""
 
     agent_scale: float = 1.0
     object_scale: float = 1.0
     kappa_scale: float = 1.0
     data_association: bool = False
+    shared_colour_scale: float | None = None
+    noise_own: float = 1.0
+    noise_shared: float = 1.0
 
-    def apply(self, estimates: _T) -> _T:
-        """A copy of ``estimates`` (any dataclass with ``agent_tril``, ``object_tril`` and ``kappa``) with the
-        Cholesky factors and the concentration scaled."""
+    def apply(self, estimates: _T, shared: Any) -> _T:
+        """A copy of ``estimates`` (any dataclass with ``agent_tril``, ``object_tril`` (..., K, 2, 2) and
+        ``kappa``) with the Cholesky factors and the concentration scaled; shared (..., K) bool (numpy or torch,
+        as the estimates): the object shares its colour with another (``mor.sim.catalog.shares_colour``)."""
+        common = self.object_scale if self.shared_colour_scale is None else self.shared_colour_scale
+        object_scale = self.object_scale + (common - self.object_scale) * shared
         return replace(estimates, agent_tril=estimates.agent_tril * self.agent_scale,  # type: ignore[type-var]
-                       object_tril=estimates.object_tril * self.object_scale, kappa=estimates.kappa * self.kappa_scale)
+                       object_tril=estimates.object_tril * object_scale[..., None, None],  # type: ignore[attr-defined]
+                       kappa=estimates.kappa * self.kappa_scale)  # type: ignore[attr-defined]
 
 
 def read_calibration(path: Path, dataset_version: str | None = None) -> Calibration:
-    """The scales in the JSON file at ``path`` (written by ``mor calibrate-lnet``; a file without
-    ``data_association`` predates the rule and was fitted without it); one clear error if unusable, or if it
+    """The calibration in the JSON file at ``path`` (written by ``mor calibrate-lnet``; a file without
+    ``data_association``, ``shared_colour_scale`` or the ``noise_*`` multipliers predates them and was fitted
+    without them); one clear error if unusable, or if it
     records a dataset version other than ``dataset_version`` (the checkpoint's)."""
     try:
         values = json.loads(Path(path).read_text())
+        shared = values.get("shared_colour_scale")
         calibration = Calibration(*(float(values[key]) for key in ("agent_scale", "object_scale", "kappa_scale")),
-                                  data_association=values.get("data_association", False))
+                                  data_association=values.get("data_association", False),
+                                  shared_colour_scale=None if shared is None else float(shared),
+                                  noise_own=float(values.get("noise_own", 1.0)),
+                                  noise_shared=float(values.get("noise_shared", 1.0)))
         if not isinstance(calibration.data_association, bool):
             raise TypeError(f"data_association must be true or false, got {calibration.data_association!r}")
     except FileNotFoundError:
@@ -57,8 +73,11 @@ def read_calibration(path: Path, dataset_version: str | None = None) -> Calibrat
 
 
 def check_scales(calibration: Calibration, path: Path) -> None:
-    """One clear error unless every scale is a positive finite number (NaN estimates give NaN scales)."""
-    scales = (calibration.agent_scale, calibration.object_scale, calibration.kappa_scale)
+    """One clear error unless every scale and multiplier is a positive finite number (NaN estimates give NaN
+    scales)."""
+    scales = (calibration.agent_scale, calibration.object_scale, calibration.kappa_scale, calibration.noise_own,
+              calibration.noise_shared, calibration.object_scale if calibration.shared_colour_scale is None
+              else calibration.shared_colour_scale)
     if not all(math.isfinite(scale) and scale > 0 for scale in scales):
         raise MorError(f"{path}: calibration scales must be positive and finite, got {calibration}; run mor "
                        "calibrate-lnet (non-finite scales come from non-finite estimates on validation)")

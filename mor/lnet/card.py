@@ -104,17 +104,33 @@ def ablation_table(results: dict[str, Any]) -> list[str]:
     return rows
 
 
+def _object_calibration(calibration: dict[str, Any]) -> str:
+    """The objects' part of a calibration in words: their σ scale(s) and, when fitted, the filter's measurement
+    noise multipliers."""
+    shared = calibration.get("shared_colour_scale")
+    scales = (f"objects σ × {calibration['object_scale']:.3f}" if shared is None else
+              f"objects σ × {calibration['object_scale']:.3f} (of their own colour) and × {shared:.3f} (sharing "
+              "their colour with another object of the episode)")
+    noise = (calibration.get("noise_own", 1.0), calibration.get("noise_shared", 1.0))
+    if noise == (1.0, 1.0):
+        return scales
+    return (f"{scales}; the filter's object measurement noise × {noise[0]:g} (own colour) and × {noise[1]:g} "
+            "(shared colour), chosen from powers of two by the validation NLL")
+
+
 def tracking_rule_table(rules: dict[str, dict[str, Any]]) -> list[str]:
     """One row per tracking rule of ``calibration.json``'s ``tracking_rules``: errors, NLL and coverage on
     validation after that rule's own calibration."""
     rows = ["| rule | objects seen earlier, median (m) | in view, median (m) | agent, median (m) | object NLL | "
-            "objects seen earlier, 1σ / 2σ / 3σ | objects σ × |", "| --- | --- | --- | --- | --- | --- | --- |"]
+            "objects seen earlier, 1σ / 2σ / 3σ | objects σ × (own / shared colour) | measurement noise × (own / "
+            "shared colour) |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name, rule in rules.items():
         r = rule["validation_after"]
         coverage = " / ".join(f"{r['coverage_objects_seen'][f'{k}sigma']:.3f}" for k in (1, 2, 3))
         rows.append(f"| {name.replace('_', ' ')} | {r['objects_seen_median_m']:.3f} | "
                     f"{r['objects_visible_median_m']:.3f} | {r['agent_median_m']:.3f} | {r['nll_objects']:.3f} | "
-                    f"{coverage} | {rule['object_scale']:.3f} |")
+                    f"{coverage} | {rule['object_scale']:.3f} / {_number(rule.get('shared_colour_scale'), 3)} | "
+                    f"{rule.get('noise_own', 1.0):g} / {rule.get('noise_shared', 1.0):g} |")
     return rows
 
 
@@ -159,8 +175,8 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
            if seconds else "")
         + f", best validation loss {train_summary['best_validation_loss']:.3f}, early stop: "
         f"{train_summary['stopped_early']}.",
-        f"- Calibration (fitted on validation): agent σ × {calibration['agent_scale']:.3f}, objects σ × "
-        f"{calibration['object_scale']:.3f}, κ × {calibration['kappa_scale']:.3f}.", "",
+        f"- Calibration (fitted on validation): agent σ × {calibration['agent_scale']:.3f}, "
+        + _object_calibration(calibration) + f", κ × {calibration['kappa_scale']:.3f}.", "",
         "## Errors on the test split (random-action episodes; means of the tracker's estimates)", "",
         *error_table(after), "",
         "'In view now': visible by the simulator's rule on this frame; 'seen earlier': visible or held at or before "
@@ -204,12 +220,15 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
     if calibration.get("tracking_rules"):
         lines += ["## Tracking rule: with and without data association (validation, each calibrated for itself)", "",
                   "The same trained weights; `mor calibrate-lnet` tracks the validation episodes both ways, fits "
-                  "the scales for each, and keeps the profile's `lnet.data_association`.", "",
+                  "the measurement noise and the scales for each, and keeps the profile's `lnet.data_association`.",
+                  "",
                   *tracking_rule_table(calibration["tracking_rules"]), ""]
     if ablation:
         rule = ("the filter variants tracked with data association" if ablation.get("data_association") else
                 "tracked without data association")
-        lines += [f"## Ablation: tracker and visibility loss at an equal budget ({ablation['steps']} steps each, "
+        pretrain = f"{ablation['pretrain_steps']} PoseNet + " if "pretrain_steps" in ablation else ""
+        lines += [f"## Ablation: tracker and visibility loss at an equal budget ({pretrain}{ablation['steps']} "
+                  "window steps each, "
                   f"first {ablation['test_episodes']} test episodes, after calibration, {rule})", "",
                   *ablation_table(ablation), "", f"![ablation]({figures['ablation']})", ""]
     lines += [

@@ -7,7 +7,7 @@ von Mises interval holding the 1-D normal's mass for k: 68.3%, 95.4%, 99.7%.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -23,9 +23,10 @@ from mor.data.schema import MAX_OBJECTS
 from mor.data.sequences import SequenceWindows
 from mor.lnet.calibration import Calibration
 from mor.lnet.likelihoods import gaussian_nll, log_i0, mahalanobis_squared, von_mises_nll
-from mor.lnet.model import LNet
+from mor.lnet.loss import previous_actions
+from mor.lnet.model import ESTIMATE_FIELDS, LNet, PoseEstimate
 from mor.lnet.runtime import LNetRunner
-from mor.lnet.train import run_model, to_device
+from mor.sim.catalog import shares_colour
 from mor.sim.config import SimConfig
 from mor.sim.geometry import wrap_angle
 from mor.sim.rollout import episode_seed, make_policy
@@ -47,7 +48,8 @@ class Predictions:
     object_truth (N, K, 2); object_mean (N, K, 2); object_tril (N, K, 2, 2); present (N, K) slot in use;
     visible (N, K) in view now (``rules.visible``); since_seen (N, K) frames since the object was last visible or
     held (0: now; -1: not yet in this episode); sightings (N, K) frames of the episode so far (this one included)
-    in which the object was in view; held (N,) index or -1; episode (N,); frame (N,).
+    in which the object was in view; held (N,) index or -1; episode (N,); frame (N,); shared (N, K) the object
+    shares its colour with another of the episode (``mor.sim.catalog.shares_colour``).
     """
 
     agent_pose: np.ndarray
@@ -65,6 +67,7 @@ class Predictions:
     held: np.ndarray
     episode: np.ndarray
     frame: np.ndarray
+    shared: np.ndarray
 
     @property
     def seen(self) -> np.ndarray:
@@ -86,10 +89,12 @@ def steps_since_seen(visible: np.ndarray, held: np.ndarray) -> np.ndarray:
 
 
 def episode_predictions(estimate: dict[str, np.ndarray], agent_pose: np.ndarray, object_positions: np.ndarray,
-                        held: np.ndarray, visible: np.ndarray, present: np.ndarray, episode: int) -> Predictions:
+                        held: np.ndarray, visible: np.ndarray, classes: np.ndarray, episode: int) -> Predictions:
     """One episode's ``Predictions`` from the tracker's estimates (``PoseEstimate.to_numpy`` of one episode,
-    (T, ...)) and the truth: agent_pose (T, 3), object_positions (T, K, 2), held (T,), visible (T, K), present (K,)."""
+    (T, ...)) and the truth: agent_pose (T, 3), object_positions (T, K, 2), held (T,), visible (T, K), classes (K,)
+    the slots' class ids (-1: empty)."""
     length = len(agent_pose)
+    present = classes >= 0
     return Predictions(
         agent_pose=agent_pose, agent_mean=estimate["agent_mean"], agent_tril=estimate["agent_tril"],
         heading=estimate["heading"], kappa=estimate["kappa"], object_truth=object_positions,
@@ -97,7 +102,7 @@ def episode_predictions(estimate: dict[str, np.ndarray], agent_pose: np.ndarray,
         present=np.broadcast_to(present, (length, len(present))), visible=visible,
         since_seen=steps_since_seen(visible, held), sightings=np.cumsum(visible, axis=0), held=held,
         episode=np.full(length, episode),
-        frame=np.arange(length))
+        frame=np.arange(length), shared=np.broadcast_to(shares_colour(classes), (length, len(classes))))
 
 
 def story(predictions: Predictions, n_frames: int = 6) -> tuple[int, list[int]]:
@@ -124,22 +129,59 @@ def concatenate(parts: list[Predictions]) -> Predictions:
     return Predictions(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(Predictions)))
 
 
+#: What ``frame_estimates`` keeps of an episode besides the PoseNet's estimates (no images: they would not fit).
+_EPISODE_FIELDS = ("agent_pose", "object_positions", "held", "visible", "object_classes", "actions")
+
+
 @torch.no_grad()
-def predict(model: LNet, root: Path, max_episodes: int, device: torch.device, progress: bool = True) -> Predictions:
-    """Run the L-Net over whole episodes of the split at ``root`` (the first ``max_episodes``)."""
+def frame_estimates(model: LNet, root: Path, max_episodes: int, device: torch.device, progress: bool = True
+                    ) -> list[tuple[PoseEstimate, dict[str, torch.Tensor]]]:
+    """The PoseNet over whole episodes of the split at ``root`` (the first ``max_episodes``): per episode its
+    estimates (1, T, ...) and the episode's truth and inputs (``_EPISODE_FIELDS``, (1, T, ...)), ready for
+    ``track_episodes`` (the tracker replayed without the PoseNet, e.g. once per tracking setting)."""
     episodes = SequenceWindows(root, window=None)
     count = min(max_episodes, len(episodes))
     model.eval()
     loader = DataLoader(torch.utils.data.Subset(episodes, range(count)), batch_size=1)
+    return [(model.frame_estimates(batch["images"].to(device), batch["object_classes"].to(device)),
+             {name: batch[name].to(device) for name in _EPISODE_FIELDS})
+            for batch in tqdm(loader, total=count, desc="PoseNet", unit="ep", disable=not progress)]
+
+
+def _padded(tensors: list[torch.Tensor], length: int) -> torch.Tensor:
+    """(1, T_i, ...) each -> (n, length, ...), each repeating its last frame (the trackers are causal)."""
+    return torch.cat([torch.cat([t, t[:, -1:].expand(1, length - t.shape[1], *t.shape[2:])], 1) for t in tensors])
+
+
+@torch.no_grad()
+def track_episodes(model: LNet, episodes: list[tuple[PoseEstimate, dict[str, torch.Tensor]]],
+                   batch_size: int = 64) -> Predictions:
+    """The model's tracker over ``frame_estimates``' episodes, ``batch_size`` episodes at a time (padded to the
+    longest), with the model's current tracking settings -> ``Predictions`` (episodes numbered in order)."""
+    model.eval()
     parts = []
-    for index, batch in enumerate(tqdm(loader, total=count, desc="predict", unit="ep", disable=not progress)):
-        _, tracked, _ = run_model(model, to_device(batch, device))
-        truth = {name: batch[name][0].numpy() for name in ("agent_pose", "object_positions", "held", "visible",
-                                                           "object_mask")}
-        parts.append(episode_predictions({name: value[0] for name, value in tracked.to_numpy().items()},
-                                         truth["agent_pose"], truth["object_positions"], truth["held"],
-                                         truth["visible"], truth["object_mask"], index))
+    for first in range(0, len(episodes), batch_size):
+        chunk = episodes[first:first + batch_size]
+        length = max(truth["held"].shape[1] for _, truth in chunk)
+        single = PoseEstimate(*(_padded([getattr(e, name) for e, _ in chunk], length) for name in ESTIMATE_FIELDS),
+                              frame="ego", visibility_logit=None if chunk[0][0].visibility_logit is None else
+                              _padded([e.visibility_logit for e, _ in chunk], length))
+        truth = {name: _padded([t[name] for _, t in chunk], length) if name != "object_classes" else
+                 torch.cat([t[name] for _, t in chunk]) for name in _EPISODE_FIELDS}
+        tracked, _ = model.track(single, truth["object_classes"], truth["held"], previous_actions(truth["actions"]))
+        estimate = tracked.to_numpy()
+        for i, (_, episode) in enumerate(chunk):
+            steps = episode["held"].shape[1]
+            parts.append(episode_predictions(
+                {name: value[i, :steps] for name, value in estimate.items()},
+                *(episode[name][0].cpu().numpy() for name in ("agent_pose", "object_positions", "held", "visible",
+                                                              "object_classes")), first + i))
     return concatenate(parts)
+
+
+def predict(model: LNet, root: Path, max_episodes: int, device: torch.device, progress: bool = True) -> Predictions:
+    """Run the L-Net over whole episodes of the split at ``root`` (the first ``max_episodes``)."""
+    return track_episodes(model, frame_estimates(model, root, max_episodes, device, progress))
 
 
 def predict_live(runner: LNetRunner, sim: SimConfig, policy: str, episodes: int, seed: int, n_envs: int = 8,
@@ -162,7 +204,8 @@ def predict_live(runner: LNetRunner, sim: SimConfig, policy: str, episodes: int,
         if hasattr(policies[i], "reset"):
             policies[i].reset()
         observations[i], infos[i] = envs[i].reset(seed=episode_seed(seed, next_episode))
-        records[i] = {"index": next_episode, "estimates": [], "truth": []}
+        records[i] = {"index": next_episode, "classes": np.asarray(observations[i]["object_classes"]), "estimates": [],
+                      "truth": []}
         next_episode += 1
 
     for i in range(len(envs)):
@@ -206,7 +249,8 @@ def _live_episode(record: dict[str, Any]) -> Predictions:
     n = objects.shape[1]
     pad = ((0, 0), (0, MAX_OBJECTS - n))
     return episode_predictions(estimate, poses, np.pad(objects, (*pad, (0, 0))), held,
-                               np.pad(seen_now.astype(bool), pad), np.arange(MAX_OBJECTS) < n, record["index"])
+                               np.pad(seen_now.astype(bool), pad),
+                               np.pad(record["classes"], (0, MAX_OBJECTS - n), constant_values=-1), record["index"])
 
 
 # ---- calibration ------------------------------------------------------------------------------------------------
@@ -214,21 +258,80 @@ def _d2(truth: np.ndarray, mean: np.ndarray, tril: np.ndarray) -> np.ndarray:
     return mahalanobis_squared(*(torch.as_tensor(a, dtype=torch.float64) for a in (truth, mean, tril))).numpy()
 
 
+def _scale(d2: np.ndarray) -> float | None:
+    """The NLL-optimal multiplier of a 2-D Gaussian's standard deviations, s^2 = mean(d^2) / 2 (None: no rows)."""
+    return float(np.sqrt(d2.mean() / 2.0)) if d2.size else None
+
+
 def fit_calibration(predictions: Predictions) -> Calibration:
     """Scales that minimize the NLL on ``predictions``: for a 2-D Gaussian scaled by s, the optimum is
-    s^2 = mean(d^2) / 2; the heading's kappa multiplier is found numerically."""
-    agent_d2 = _d2(predictions.agent_pose[:, :2], predictions.agent_mean, predictions.agent_tril)
-    object_d2 = _d2(predictions.object_truth, predictions.object_mean, predictions.object_tril)[predictions.present]
-    error = torch.as_tensor(wrap_angle(predictions.agent_pose[:, 2] - predictions.heading))
-    kappa = torch.as_tensor(predictions.kappa, dtype=torch.float64)
+    s^2 = mean(d^2) / 2, per group of objects (of their own colour; sharing it with another); the heading's kappa
+    multiplier is found numerically. The tracking settings (rule, measurement noise) are left at their defaults:
+    the caller records the ones the predictions were tracked with."""
+    p = predictions
+    agent_d2 = _d2(p.agent_pose[:, :2], p.agent_mean, p.agent_tril)
+    object_d2 = _d2(p.object_truth, p.object_mean, p.object_tril)
+    own, shared = _scale(object_d2[p.present & ~p.shared]), _scale(object_d2[p.present & p.shared])
+    error = torch.as_tensor(wrap_angle(p.agent_pose[:, 2] - p.heading))
+    kappa = torch.as_tensor(p.kappa, dtype=torch.float64)
 
     def heading_nll(log_scale: float) -> float:
         scaled = kappa * float(np.exp(log_scale))
         return float((-scaled * torch.cos(error) + log_i0(scaled)).mean())
 
     log_scale = optimize.minimize_scalar(heading_nll, bounds=(-8.0, 8.0), method="bounded").x
-    return Calibration(float(np.sqrt(agent_d2.mean() / 2.0)), float(np.sqrt(object_d2.mean() / 2.0)),
-                       float(np.exp(log_scale)))
+    return Calibration(_scale(agent_d2) or 1.0, own if own is not None else (shared or 1.0), float(np.exp(log_scale)),
+                       shared_colour_scale=shared if own is not None else None)
+
+
+#: The measurement-noise multipliers ``fit_measurement_noise`` chooses from: powers of two, 1/16 to 64.
+NOISE_GRID = tuple(2.0 ** k for k in range(-4, 7))
+
+
+def calibrated_object_nll(predictions: Predictions) -> float:
+    """The objects' mean NLL (present slots, all frames) after ``fit_calibration``'s scales."""
+    p = fit_calibration(predictions).apply(predictions, predictions.shared)
+    as_t = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
+    return float(gaussian_nll(as_t(p.object_truth), as_t(p.object_mean), as_t(p.object_tril))[
+        torch.as_tensor(p.present)].mean())
+
+
+def fit_measurement_noise(model: LNet, episodes: list[tuple[PoseEstimate, dict[str, torch.Tensor]]],
+                          rounds: int = 2) -> tuple[tuple[float, float], dict[str, float]]:
+    """The filter's measurement-noise multipliers (own colour, shared colour) from ``NOISE_GRID`` that minimize
+    ``calibrated_object_nll`` of the tracked ``episodes`` (``frame_estimates``), by coordinate search from (1, 1):
+    ``rounds`` passes over each multiplier in turn. Returns the choice (left set on the model) and every tried
+    pair's NLL ("own x shared": nll). The LSTM tracker has no such noise: (1, 1) and no tries."""
+    if model.config.tracker != "filter":
+        return (1.0, 1.0), {}
+    tried: dict[tuple[float, float], float] = {}
+
+    def nll(noise: tuple[float, float]) -> float:
+        if noise not in tried:
+            model.use_measurement_noise(*noise)
+            tried[noise] = calibrated_object_nll(track_episodes(model, episodes))
+        return tried[noise]
+
+    best = (1.0, 1.0)
+    for _ in range(rounds):
+        best = min(((value, best[1]) for value in NOISE_GRID), key=nll)
+        best = min(((best[0], value) for value in NOISE_GRID), key=nll)
+    model.use_measurement_noise(*best)
+    return best, {f"{own:g} x {shared:g}": value for (own, shared), value in tried.items()}
+
+
+def calibrate(model: LNet, episodes: list[tuple[PoseEstimate, dict[str, torch.Tensor]]]
+              ) -> tuple[Predictions, Calibration, dict[str, float]]:
+    """Calibrate ``model`` (with its current tracking rule) on validation episodes (``frame_estimates``): the
+    filter's measurement noise (``fit_measurement_noise``), then the scales (``fit_calibration``). Returns the
+    uncalibrated predictions with the chosen noise, the calibration (recording the rule and the noise) and the
+    noise search's tries."""
+    noise, tried = fit_measurement_noise(model, episodes)
+    predictions = track_episodes(model, episodes)
+    data_association = model.config.tracker == "filter" and model.filter.data_association
+    calibration = replace(fit_calibration(predictions), data_association=data_association, noise_own=noise[0],
+                          noise_shared=noise[1])
+    return predictions, calibration, tried
 
 
 # ---- metrics ----------------------------------------------------------------------------------------------------

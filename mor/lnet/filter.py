@@ -16,6 +16,13 @@ each belief explains it, and every weighted update keeps the spread of its two o
 probabilistic data association filter's covariance, Bar-Shalom et al. 2009), so a doubtful update widens the
 belief instead of shrinking it onto a possibly wrong place.
 
+``measurement_noise`` (a tracking-time setting fitted on validation by ``mor calibrate-lnet``, recorded in the
+calibration): multipliers of the PoseNet's object measurement covariance for objects of a colour of their own and
+for objects that share their colour with another (``mor.sim.catalog.shares_colour``). The PoseNet's object head
+sees one slot's class at a time, so it cannot know that a same-coloured object is in the episode; nearly all the
+badly wrong beliefs are of such objects, while the measurements of the others deserve more trust than the one
+learned scale gives (docs/assumptions.md).
+
 Shapes: B episodes, K object slots. Positions in metres, headings in radians; the heading's belief is a Gaussian
 (mean, variance) on the circle, reported as a von Mises with kappa = 1 / variance.
 """
@@ -139,6 +146,7 @@ class BeliefFilter(nn.Module):
         super().__init__()
         self.n_slots = n_slots
         self.data_association = data_association  # a tracking-time rule, not a weight (module docstring)
+        self.measurement_noise = (1.0, 1.0)  # objects of their own colour, objects sharing theirs (docstring)
         actions = N_ACTIONS + 1  # the last row: no previous action (an episode's first frame)
         self.forward_distance = nn.Parameter(torch.zeros(actions))
         self.turn = nn.Parameter(torch.zeros(actions))
@@ -164,11 +172,13 @@ class BeliefFilter(nn.Module):
                 (object_var * eye).expand(n, self.n_slots, 2, 2), torch.full((n,), -1, dtype=torch.long, device=device))
 
     def step(self, state: FilterState, agent_fix: tuple[torch.Tensor, ...], ego_objects: tuple[torch.Tensor, ...],
-             visibility: torch.Tensor | None, held: torch.Tensor, previous_action: torch.Tensor) -> FilterState:
+             visibility: torch.Tensor | None, held: torch.Tensor, previous_action: torch.Tensor,
+             shared: torch.Tensor | None = None) -> FilterState:
         """One frame. agent_fix: the PoseNet's (mean (B, 2), tril (B, 2, 2), heading (B,), kappa (B,));
         ego_objects: (mean (B, K, 2), tril (B, K, 2, 2)) in the ego frame; visibility (B, K) probabilities or
         None (then every measurement is weighted by the gate alone); held (B,) index or -1; previous_action (B,)
-        the action before this frame, -1 none."""
+        the action before this frame, -1 none; shared (B, K) bool, the object shares its colour with another
+        (which ``measurement_noise`` it gets; None: all of their own colour)."""
         agent, agent_cov, heading, heading_var, objects, object_cov, previous_held = state
         eye = _eye(agent)
         # 1. Motion: the previous action's learned displacement and turn, and their learned noise.
@@ -212,6 +222,12 @@ class BeliefFilter(nn.Module):
         jacobian = torch.stack([-s[..., 0] * ego_mean[..., 0] - c[..., 0] * ego_mean[..., 1],
                                 c[..., 0] * ego_mean[..., 0] - s[..., 0] * ego_mean[..., 1]], -1)  # d measured / d heading
         ego_cov = ego_tril @ ego_tril.transpose(-1, -2)
+        own, common = self.measurement_noise
+        if (own, common) != (1.0, 1.0):
+            multiplier = torch.full_like(ego_cov[..., 0, 0], own)
+            if shared is not None:
+                multiplier = torch.where(shared, common, multiplier)
+            ego_cov = ego_cov * multiplier[..., None, None]
         noise = (scale[2] * rotation @ ego_cov @ rotation.transpose(-1, -2) + agent_cov[:, None]
                  + heading_var[:, None, None, None] * _outer(jacobian))
         weight = (~is_held).to(objects.dtype) if visibility is None else visibility * ~is_held

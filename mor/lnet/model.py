@@ -15,13 +15,13 @@ from mor.lnet.filter import BeliefFilter, cholesky_2x2
 from mor.lnet.frames import ego_to_world
 from mor.lnet.likelihoods import MIN_KAPPA, positive, scale_tril
 from mor.lnet.params import LNetConfig
-from mor.sim.catalog import N_CLASSES
+from mor.sim.catalog import N_CLASSES, shares_colour
 from mor.sim.rules import N_ACTIONS
 
 K = MAX_OBJECTS
 _ABSENT = N_CLASSES  # embedding index of an absent slot
 _NO_ACTION = N_ACTIONS  # one-hot index of "no previous action"
-_FIELDS = ("agent_mean", "agent_tril", "heading", "kappa", "object_mean", "object_tril")  # of a PoseEstimate
+ESTIMATE_FIELDS = ("agent_mean", "agent_tril", "heading", "kappa", "object_mean", "object_tril")  # of a PoseEstimate
 
 
 @dataclass
@@ -42,7 +42,7 @@ class PoseEstimate:
     visibility_logit: torch.Tensor | None = None  # (..., K), the PoseNet's, when the config asks for visibility
 
     def to_numpy(self) -> dict[str, object]:
-        return {name: getattr(self, name).detach().cpu().numpy() for name in _FIELDS}
+        return {name: getattr(self, name).detach().cpu().numpy() for name in ESTIMATE_FIELDS}
 
 
 def _mlp(inputs: int, hidden: int, outputs: int) -> nn.Sequential:
@@ -196,6 +196,14 @@ class LNet(nn.Module):
         else:
             self.filter = BeliefFilter(K)
 
+    def use_measurement_noise(self, own: float, shared: float) -> None:
+        """The filter's object measurement-noise multipliers (``mor.lnet.filter``) for objects of their own colour
+        and objects sharing it; anything but (1, 1) with the LSTM tracker is a ValueError."""
+        if self.config.tracker == "filter":
+            self.filter.measurement_noise = (float(own), float(shared))
+        elif (own, shared) != (1.0, 1.0):
+            raise ValueError("measurement-noise multipliers need the filter tracker; this model's tracker is the LSTM")
+
     def use_data_association(self, on: bool) -> None:
         """Track with the filter's data association (``mor.lnet.filter``) or without; ``on`` with the LSTM tracker
         is a ValueError."""
@@ -236,14 +244,26 @@ class LNet(nn.Module):
         """images (B, T, 3, H, W); classes (B, K); held (B, T) index or -1; previous_actions (B, T) the action
         taken before each frame (-1 at an episode's start). Returns (per-frame PoseNet estimates, the tracker's
         world-frame estimates, the tracker's state), both estimates with leading dims (B, T)."""
+        single = self.frame_estimates(images, classes)
+        return (single, *self.track(single, classes, held, previous_actions, state))
+
+    def frame_estimates(self, images: torch.Tensor, classes: torch.Tensor) -> PoseEstimate:
+        """The PoseNet on every frame: images (B, T, 3, H, W), classes (B, K) -> estimates (B, T, ...), ego frame."""
         b, t = images.shape[:2]
         frame_classes = classes.unsqueeze(1).expand(-1, t, -1).reshape(b * t, K)
         flat = self.posenet(images.flatten(0, 1), frame_classes)
         visibility = None if flat.visibility_logit is None else flat.visibility_logit.unflatten(0, (b, t))
-        single = PoseEstimate(*(getattr(flat, n).unflatten(0, (b, t)) for n in _FIELDS), frame="ego",
-                              visibility_logit=visibility)
+        return PoseEstimate(*(getattr(flat, n).unflatten(0, (b, t)) for n in ESTIMATE_FIELDS), frame="ego",
+                            visibility_logit=visibility)
+
+    def track(self, single: PoseEstimate, classes: torch.Tensor, held: torch.Tensor, previous_actions: torch.Tensor,
+              state: TrackerState | None = None) -> tuple[PoseEstimate, TrackerState]:
+        """The tracker over the PoseNet's estimates ``single`` (B, T, ...) -> (world-frame estimates (B, T, ...),
+        the tracker's state); classes, held and previous_actions as in ``forward``."""
         if self.config.tracker == "filter":
-            return (single, *self._filter(single, held, previous_actions, state))
+            return self._filter(single, held, previous_actions, shares_colour(classes), state)
+        t = held.shape[1]
+        visibility = single.visibility_logit
         projected = ego_to_world(single.object_mean, single.agent_mean, single.heading).flatten(-2)
         present = (classes >= 0).float().unsqueeze(1).expand(-1, t, -1)
         held_one_hot = nn.functional.one_hot(torch.where(held >= 0, held, torch.full_like(held, K)), K + 1).float()
@@ -257,12 +277,12 @@ class LNet(nn.Module):
         raw = self.head(hidden)
         mean, tril, heading, kappa = _agent_distribution(raw[..., :8])
         objects = raw[..., 8:].unflatten(-1, (K, 5))
-        tracked = PoseEstimate(mean, tril, heading, kappa, objects[..., :2], scale_tril(objects[..., 2:5]), "world")
-        return single, tracked, state
+        return PoseEstimate(mean, tril, heading, kappa, objects[..., :2], scale_tril(objects[..., 2:5]), "world"), state
 
-    def _filter(self, single: PoseEstimate, held: torch.Tensor, previous_actions: torch.Tensor,
+    def _filter(self, single: PoseEstimate, held: torch.Tensor, previous_actions: torch.Tensor, shared: torch.Tensor,
                 state: TrackerState | None) -> tuple[PoseEstimate, TrackerState]:
-        """The belief filter over the T frames of ``single`` -> (world-frame estimates (B, T, ...), last state)."""
+        """The belief filter over the T frames of ``single`` -> (world-frame estimates (B, T, ...), last state);
+        shared (B, K): the object shares its colour with another of the episode."""
         b, t = held.shape
         state = self.filter.initial_state(b, held.device) if state is None else state
         visibility = None if single.visibility_logit is None else torch.sigmoid(single.visibility_logit)
@@ -273,7 +293,7 @@ class LNet(nn.Module):
             state = self.filter.step(
                 state, (single.agent_mean[:, i], single.agent_tril[:, i], single.heading[:, i], single.kappa[:, i]),
                 (single.object_mean[:, i], single.object_tril[:, i]), None if visibility is None else visibility[:, i],
-                held[:, i], previous_actions[:, i])
+                held[:, i], previous_actions[:, i], shared)
             agent, agent_cov, heading, heading_var, objects, object_cov, _ = state
             outputs.append((agent, cholesky_2x2(agent_cov), heading,
                             (1.0 / heading_var).clamp(min=MIN_KAPPA), objects, cholesky_2x2(object_cov)))

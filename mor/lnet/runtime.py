@@ -14,7 +14,8 @@ windows use. One forward pass for all N environments, without gradients. The est
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+import json
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,7 @@ from mor.lnet.calibration import CALIBRATION_FILE, Calibration, read_calibration
 from mor.lnet.checkpoint import load_checkpoint, model_from_checkpoint
 from mor.lnet.model import LNet, PoseEstimate
 from mor.lnet.params import LNetConfig
+from mor.sim.catalog import shares_colour
 from mor.sim.rules import N_ACTIONS
 
 
@@ -143,17 +145,19 @@ class LNetRunner:
         previous_actions (N,) the action taken before this frame, -1 at an episode's start.
         """
         tracked, state = self.track(images, object_classes, held, previous_actions, state)
-        return self.estimates(tracked, np.asarray(object_classes).shape[1]), state
+        return self.estimates(tracked, np.asarray(object_classes)), state
 
-    def estimates(self, tracked: PoseEstimate, n_objects: int) -> Estimates:
-        """The last frame of the model's world-frame estimate (N, T, ...) for the first ``n_objects`` slots,
-        calibrated, as numpy."""
-        last = self.calibration.apply(PoseEstimate(*(getattr(tracked, name)[:, -1] for name in (
-            "agent_mean", "agent_tril", "heading", "kappa", "object_mean", "object_tril")), frame=tracked.frame))
+    def estimates(self, tracked: PoseEstimate, object_classes: np.ndarray) -> Estimates:
+        """The last frame of the model's world-frame estimate (N, T, ...) for the n objects of
+        ``object_classes`` (N, n), calibrated, as numpy."""
+        n_objects = object_classes.shape[1]
+        last = PoseEstimate(*(getattr(tracked, name)[:, -1] for name in (
+            "agent_mean", "agent_tril", "heading", "kappa")), tracked.object_mean[:, -1, :n_objects],
+            tracked.object_tril[:, -1, :n_objects], frame=tracked.frame)
+        last = self.calibration.apply(last, shares_colour(torch.as_tensor(object_classes, device=self.device)))
         as_numpy = lambda t: t.float().cpu().numpy()  # noqa: E731
         return Estimates(as_numpy(last.agent_mean), _covariance(last.agent_tril), as_numpy(last.heading),
-                         as_numpy(last.kappa), as_numpy(last.object_mean[:, :n_objects]),
-                         _covariance(last.object_tril[:, :n_objects]))
+                         as_numpy(last.kappa), as_numpy(last.object_mean), _covariance(last.object_tril))
 
 
 def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str, Any] | None = None,
@@ -177,14 +181,19 @@ def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str
                        f"{data_association} (lnet.data_association); run mor calibrate-lnet")
     model = model_from_checkpoint(saved, device)
     model.use_data_association(calibration.data_association)
+    model.use_measurement_noise(calibration.noise_own, calibration.noise_shared)
     return LNetRunner(model, calibration, int(saved["image_size"]), version, device, file_digest(path), compiled)
 
 
 def lnet_identity(dataset_version: str, checkpoint_digest: str | None, calibration: Calibration) -> str:
     """The dataset version; for a loaded checkpoint, the first 12 hex digits of its file's SHA-256 (another training
-    run is another L-Net); and ``-associated`` when it tracks with the filter's data association (other estimates)."""
+    run is another L-Net); and, unless it is the identity calibration, ``-cal`` and 8 hex digits of the calibration
+    (another tracking rule or other scales give other estimates: what a policy reads changes)."""
     identity = dataset_version if checkpoint_digest is None else f"{dataset_version}-{checkpoint_digest}"
-    return f"{identity}-associated" if calibration.data_association else identity
+    if calibration == Calibration():
+        return identity
+    digest = hashlib.sha256(json.dumps(asdict(calibration), sort_keys=True).encode()).hexdigest()[:8]
+    return f"{identity}-cal{digest}"
 
 
 def file_digest(path: Path) -> str:

@@ -6,6 +6,7 @@ Class id ``c = shape_index * 6 + colour_index`` for 4 shapes x 6 colours (paper 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypeVar
 
 SHAPES: tuple[str, ...] = ("cube", "sphere", "cylinder", "capsule")
 COLOURS: dict[str, tuple[float, float, float]] = {
@@ -42,12 +43,24 @@ class ObjectClass:
         return f"{self.colour}_{self.shape}"
 
 
+ArrayLike = TypeVar("ArrayLike")  # a numpy array or a torch tensor
+
+
 def object_class(class_id: int) -> ObjectClass:
     """The class with id ``class_id`` in [0, 24)."""
     if not 0 <= class_id < N_CLASSES:
         raise ValueError(f"class id {class_id} is outside [0, {N_CLASSES})")
     shape_index, colour_index = divmod(int(class_id), len(COLOURS))
     return ObjectClass(int(class_id), SHAPES[shape_index], COLOUR_NAMES[colour_index])
+
+
+def shares_colour(classes: ArrayLike) -> ArrayLike:
+    """(..., K) class ids (-1: an empty slot) -> (..., K) bool: another object of the same episode has this slot's
+    colour (objects that differ by shape alone, which a far-away view confuses). numpy arrays or torch tensors."""
+    present = classes >= 0
+    colour = classes % len(COLOURS)
+    same = (colour[..., :, None] == colour[..., None, :]) & present[..., :, None] & present[..., None, :]
+    return same.sum(-1) > 1
 
 
 @dataclass(frozen=True)

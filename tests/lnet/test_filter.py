@@ -103,3 +103,20 @@ def test_cholesky_2x2_reproduces_the_covariance() -> None:
     tril = cholesky_2x2(cov)
     torch.testing.assert_close(tril @ tril.T, cov)
     torch.testing.assert_close(tril, torch.linalg.cholesky(cov))
+
+
+@torch.no_grad()
+def test_measurement_noise_multipliers_trust_objects_of_their_own_colour_more_than_shared_ones() -> None:
+    belief = BeliefFilter(n_slots=2)
+    belief.measurement_noise = (0.25, 16.0)  # (own colour, shared colour)
+    ego = (torch.tensor([[(2.0, 1.0), (2.0, -1.0)]]), (0.5 * torch.eye(2)).expand(1, 2, 2, 2))
+    state = belief.step(belief.initial_state(1), _fix(0.0, 0.0, 0.0), ego, torch.tensor([[1.0, 1.0]]),
+                        torch.tensor([-1]), torch.tensor([-1]), shared=torch.tensor([[True, False]]))
+    objects, object_cov = state[4][0], state[5][0]
+    # the same measurement error either way; the shared-colour slot moves less and stays wider
+    assert objects[1, 1].item() == pytest.approx(-1.0, abs=0.1) and 0.1 < objects[0, 1].item() < 0.9
+    assert object_cov[0, 0, 0] > 10 * object_cov[1, 0, 0]
+    default = BeliefFilter(n_slots=2).step(BeliefFilter(n_slots=2).initial_state(1), _fix(0.0, 0.0, 0.0), ego,
+                                           torch.tensor([[1.0, 1.0]]), torch.tensor([-1]), torch.tensor([-1]),
+                                           shared=torch.tensor([[True, False]]))
+    torch.testing.assert_close(default[4][0, 0], default[4][0, 1] * torch.tensor([1.0, -1.0]))  # (1, 1): no effect

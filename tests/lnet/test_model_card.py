@@ -6,13 +6,15 @@ from mor.lnet.card import tracking_rule_table
 
 
 def test_the_tracking_rule_table_has_one_row_per_rule_from_its_own_calibration() -> None:
-    def rule(seen: float, scale: float) -> dict:
-        return {"object_scale": scale, "validation_after": {
+    def rule(seen: float, scale: float, **fitted: float) -> dict:
+        return {"object_scale": scale, **fitted, "validation_after": {
             "objects_seen_median_m": seen, "objects_visible_median_m": 0.25, "agent_median_m": 0.12,
             "nll_objects": 1.6, "coverage_objects_seen": {"1sigma": 0.74, "2sigma": 0.939, "3sigma": 0.965}}}
 
-    rows = tracking_rule_table({"with_data_association": rule(0.2, 1.28),
-                                "without_data_association": rule(0.216, 2.149)})
+    rows = tracking_rule_table({"with_data_association": rule(0.2, 1.28, shared_colour_scale=0.9, noise_own=0.25,
+                                                              noise_shared=32.0),
+                                "without_data_association": rule(0.216, 2.149)})  # a calibration from before
     assert len(rows) == 4 and rows[0].count("|") == rows[1].count("|") == rows[2].count("|")
-    assert rows[2].startswith("| with data association | 0.200 | 0.250 | 0.120 | 1.600 | 0.740 / 0.939 / 0.965 | 1.280")
-    assert rows[3].startswith("| without data association | 0.216 |") and rows[3].endswith("| 2.149 |")
+    assert rows[2] == ("| with data association | 0.200 | 0.250 | 0.120 | 1.600 | 0.740 / 0.939 / 0.965 | 1.280 / "
+                       "0.900 | 0.25 / 32 |")
+    assert rows[3].startswith("| without data association | 0.216 |") and rows[3].endswith("| 2.149 / – | 1 / 1 |")

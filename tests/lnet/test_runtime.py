@@ -153,11 +153,19 @@ def test_the_tracking_rule_follows_the_calibration_and_a_mismatch_is_one_clear_e
     scales = {"agent_scale": 1, "object_scale": 1, "kappa_scale": 1, "dataset_version": "v"}
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True}))
     runner = load_lnet(checkpoint)
-    assert runner.model.filter.data_association and runner.identity.endswith("-associated")
+    assert runner.model.filter.data_association and "-cal" in runner.identity
     assert checkpoint_identity(checkpoint) == runner.identity
     with pytest.raises(MorError, match="fitted with data_association True but this run's is False"):
         load_lnet(checkpoint, data_association=False)
     assert not load_lnet(checkpoint, calibrated=False).model.filter.data_association
+    # the measurement noise the calibration was fitted with is the one tracked with; another calibration, another
+    # identity (a policy trained through the first is stale for the second)
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True, "noise_own": 0.5,
+                                                         "noise_shared": 4.0, "shared_colour_scale": 2.0}))
+    noisy = load_lnet(checkpoint)
+    assert noisy.model.filter.measurement_noise == (0.5, 4.0) and noisy.calibration.shared_colour_scale == 2.0
+    assert noisy.identity != runner.identity and checkpoint_identity(checkpoint) == noisy.identity
+    assert load_lnet(checkpoint, calibrated=False).model.filter.measurement_noise == (1.0, 1.0)
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps(scales))  # a file from before the rule: fitted without it
     assert not load_lnet(checkpoint).model.filter.data_association
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": "yes"}))
@@ -221,7 +229,7 @@ def test_error_of_objects_in_view_is_binned_by_their_distance_from_the_agent() -
                 "kappa": np.ones(2), "object_mean": truth + [[[0.1, 0.0], [0.0, 0.4]], [[0.3, 0.0], [2.0, 0.0]]],
                 "object_tril": np.tile(np.eye(2), (2, 2, 1, 1))}
     visible = np.array([[True, True], [True, False]])
-    p = episode_predictions(estimate, np.zeros((2, 3)), truth, np.array([-1, -1]), visible, np.ones(2, bool), 0)
+    p = episode_predictions(estimate, np.zeros((2, 3)), truth, np.array([-1, -1]), visible, np.array([0, 1]), 0)
     binned = error_by_distance_in_view(p)
     assert binned["count"] == [2, 0, 1, 0, 0, 0]  # the object at 6.5 m is not in view on frame 1
     assert binned["median_m"][0] == pytest.approx(0.2) and binned["median_m"][2] == pytest.approx(0.4)
