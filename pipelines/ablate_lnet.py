@@ -47,7 +47,7 @@ def run(profile: Profile, study: str, steps: int, episodes: int, pretrain_steps:
         model.use_data_association(profile.lnet.data_association and config.tracker == "filter")
         _, calibration, _ = calibrate(model, frame_estimates(model, paths.LEROBOT / "validation", episodes, device))
         test = predict(model, paths.LEROBOT / "test", episodes, device)
-        scored = metrics(calibration.apply(test, test.shared))
+        scored = metrics(calibration.apply(test, test.confusable))
         results[name] = {key: scored[key] for key in REPORTED}
         results[name].update(best_validation_loss=summary["best_validation_loss"], train_seconds=summary["seconds"],
                              overrides=overrides, calibration=asdict(calibration))

@@ -41,10 +41,10 @@ def run(profile: Profile) -> dict[str, Any]:
         fits[rule] = calibrate(runner.model, episodes)
     predictions, calibration, tried = fits[chosen]
     check_scales(calibration, paths.LNET_CALIBRATION)
-    after = {rule: metrics(fitted.apply(p, p.shared)) for rule, (p, fitted, _) in fits.items()}
+    after = {rule: metrics(fitted.apply(p, p.confusable)) for rule, (p, fitted, _) in fits.items()}
     payload = {**asdict(calibration), "dataset_version": runner.dataset_version,
                "fitted_on": {"split": "validation", "frames": int(len(predictions.frame))},
-               "measurement_noise_nll": tried,
+               "measurement_noise_error_m": tried,
                "validation_before": metrics(predictions)["coverage"],
                "validation_after": after[chosen]["coverage"],
                "tracking_rules": {("with" if rule else "without") + "_data_association": {

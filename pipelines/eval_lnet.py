@@ -38,7 +38,7 @@ def run(profile: Profile) -> dict[str, Any]:
     predictions = predict(runner.model, paths.LEROBOT / "test", profile.lnet.eval_episodes, runner.device)
 
     def scored(p: Predictions) -> dict[str, Any]:
-        return {"before_calibration": metrics(p), "after_calibration": metrics(calibration.apply(p, p.shared))}
+        return {"before_calibration": metrics(p), "after_calibration": metrics(calibration.apply(p, p.confusable))}
 
     result = {"dataset_version": manifest_version(manifest), "calibration": asdict(calibration), **scored(predictions)}
     # Real runs of the test split (its episodes are numbered in manifest order), reported on their own.
@@ -60,7 +60,7 @@ def run(profile: Profile) -> dict[str, Any]:
     shown_episode, frames = story(predictions)
     episode = SequenceWindows(paths.LEROBOT / "test", window=None)[shown_episode]
     rows = predictions.episode == shown_episode
-    shown = calibration.apply(predictions, predictions.shared).select(rows)
+    shown = calibration.apply(predictions, predictions.confusable).select(rows)
     truth = {"agent_poses": episode["agent_pose"].numpy(), "object_positions": episode["object_positions"].numpy(),
              "object_classes": episode["object_classes"].numpy()}
     estimate = {name: getattr(shown, name) for name in ("agent_mean", "agent_tril", "heading", "kappa",

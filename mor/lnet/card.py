@@ -19,9 +19,12 @@ _ERROR_ROWS = (("agent position (m)", ("agent_position_error_m",), 3),
                (f"objects in view within PICK's reach, ≤ {PICK_RANGE:g} m (m)",
                 ("object_position_error_m", "visible_in_reach"), 3),
                ("objects seen earlier (m)", ("object_position_error_m", "seen"), 3),
+               ("of which sharing their colour with another object, not held (m)",
+                ("object_position_error_m", "seen_confusable"), 3),
                ("objects not yet seen (m)", ("object_position_error_m", "unseen"), 3),
                ("all objects (m)", ("object_position_error_m", "all"), 3))
-_COVERAGE_GROUPS = ("agent_position", "heading", "objects_visible", "objects_seen", "objects_unseen")
+_COVERAGE_GROUPS = ("agent_position", "heading", "objects_visible", "objects_seen", "objects_seen_confusable",
+                    "objects_unseen")
 
 
 def _get(d: dict, path: tuple[str, ...]) -> Any:
@@ -115,7 +118,7 @@ def _object_calibration(calibration: dict[str, Any]) -> str:
     if noise == (1.0, 1.0):
         return scales
     return (f"{scales}; the filter's object measurement noise × {noise[0]:g} (own colour) and × {noise[1]:g} "
-            "(shared colour), chosen from powers of two by the validation NLL")
+            "(shared colour), chosen from powers of two by the validation error of the objects seen earlier")
 
 
 def tracking_rule_table(rules: dict[str, dict[str, Any]]) -> list[str]:

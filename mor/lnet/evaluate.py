@@ -21,12 +21,11 @@ from tqdm import tqdm
 import mor.sim  # noqa: F401 - registers the environments
 from mor.data.schema import MAX_OBJECTS
 from mor.data.sequences import SequenceWindows
-from mor.lnet.calibration import Calibration
+from mor.lnet.calibration import Calibration, confusable
 from mor.lnet.likelihoods import gaussian_nll, log_i0, mahalanobis_squared, von_mises_nll
 from mor.lnet.loss import previous_actions
 from mor.lnet.model import ESTIMATE_FIELDS, LNet, PoseEstimate
 from mor.lnet.runtime import LNetRunner
-from mor.sim.catalog import shares_colour
 from mor.sim.config import SimConfig
 from mor.sim.geometry import wrap_angle
 from mor.sim.rollout import episode_seed, make_policy
@@ -48,8 +47,8 @@ class Predictions:
     object_truth (N, K, 2); object_mean (N, K, 2); object_tril (N, K, 2, 2); present (N, K) slot in use;
     visible (N, K) in view now (``rules.visible``); since_seen (N, K) frames since the object was last visible or
     held (0: now; -1: not yet in this episode); sightings (N, K) frames of the episode so far (this one included)
-    in which the object was in view; held (N,) index or -1; episode (N,); frame (N,); shared (N, K) the object
-    shares its colour with another of the episode (``mor.sim.catalog.shares_colour``).
+    in which the object was in view; held (N,) index or -1; episode (N,); frame (N,); confusable (N, K) the
+    object shares its colour with another of the episode (``mor.sim.catalog.shares_colour``) and is not held.
     """
 
     agent_pose: np.ndarray
@@ -67,7 +66,7 @@ class Predictions:
     held: np.ndarray
     episode: np.ndarray
     frame: np.ndarray
-    shared: np.ndarray
+    confusable: np.ndarray
 
     @property
     def seen(self) -> np.ndarray:
@@ -102,7 +101,7 @@ def episode_predictions(estimate: dict[str, np.ndarray], agent_pose: np.ndarray,
         present=np.broadcast_to(present, (length, len(present))), visible=visible,
         since_seen=steps_since_seen(visible, held), sightings=np.cumsum(visible, axis=0), held=held,
         episode=np.full(length, episode),
-        frame=np.arange(length), shared=np.broadcast_to(shares_colour(classes), (length, len(classes))))
+        frame=np.arange(length), confusable=confusable(classes, held))
 
 
 def story(predictions: Predictions, n_frames: int = 6) -> tuple[int, list[int]]:
@@ -265,13 +264,14 @@ def _scale(d2: np.ndarray) -> float | None:
 
 def fit_calibration(predictions: Predictions) -> Calibration:
     """Scales that minimize the NLL on ``predictions``: for a 2-D Gaussian scaled by s, the optimum is
-    s^2 = mean(d^2) / 2, per group of objects (of their own colour; sharing it with another); the heading's kappa
+    s^2 = mean(d^2) / 2, per group of objects (confusable: sharing their colour with another and not held; the
+    others); the heading's kappa
     multiplier is found numerically. The tracking settings (rule, measurement noise) are left at their defaults:
     the caller records the ones the predictions were tracked with."""
     p = predictions
     agent_d2 = _d2(p.agent_pose[:, :2], p.agent_mean, p.agent_tril)
     object_d2 = _d2(p.object_truth, p.object_mean, p.object_tril)
-    own, shared = _scale(object_d2[p.present & ~p.shared]), _scale(object_d2[p.present & p.shared])
+    own, shared = _scale(object_d2[p.present & ~p.confusable]), _scale(object_d2[p.present & p.confusable])
     error = torch.as_tensor(wrap_angle(p.agent_pose[:, 2] - p.heading))
     kappa = torch.as_tensor(p.kappa, dtype=torch.float64)
 
@@ -288,34 +288,34 @@ def fit_calibration(predictions: Predictions) -> Calibration:
 NOISE_GRID = tuple(2.0 ** k for k in range(-4, 7))
 
 
-def calibrated_object_nll(predictions: Predictions) -> float:
-    """The objects' mean NLL (present slots, all frames) after ``fit_calibration``'s scales."""
-    p = fit_calibration(predictions).apply(predictions, predictions.shared)
-    as_t = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
-    return float(gaussian_nll(as_t(p.object_truth), as_t(p.object_mean), as_t(p.object_tril))[
-        torch.as_tensor(p.present)].mean())
+def seen_object_mean_error(predictions: Predictions) -> float:
+    """The mean distance (m) between estimated and true positions of the objects seen earlier (``metrics``'
+    "seen" rows): what the measurement noise is chosen by (a mean, so the badly wrong beliefs count)."""
+    return float(_object_error(predictions)[predictions.present & predictions.seen].mean())
 
 
 def fit_measurement_noise(model: LNet, episodes: list[tuple[PoseEstimate, dict[str, torch.Tensor]]],
                           rounds: int = 2) -> tuple[tuple[float, float], dict[str, float]]:
     """The filter's measurement-noise multipliers (own colour, shared colour) from ``NOISE_GRID`` that minimize
-    ``calibrated_object_nll`` of the tracked ``episodes`` (``frame_estimates``), by coordinate search from (1, 1):
-    ``rounds`` passes over each multiplier in turn. Returns the choice (left set on the model) and every tried
-    pair's NLL ("own x shared": nll). The LSTM tracker has no such noise: (1, 1) and no tries."""
+    ``seen_object_mean_error`` of the tracked ``episodes`` (``frame_estimates``), by coordinate search from (1, 1):
+    ``rounds`` passes over each multiplier in turn. The noise decides where the beliefs go, so it is chosen by
+    their error; how wide they are stated is the calibration's scales' job (``fit_calibration``, by the NLL).
+    Returns the choice (left set on the model) and every tried pair's error ("own x shared": m). The LSTM tracker
+    has no such noise: (1, 1) and no tries."""
     if model.config.tracker != "filter":
         return (1.0, 1.0), {}
     tried: dict[tuple[float, float], float] = {}
 
-    def nll(noise: tuple[float, float]) -> float:
+    def error(noise: tuple[float, float]) -> float:
         if noise not in tried:
             model.use_measurement_noise(*noise)
-            tried[noise] = calibrated_object_nll(track_episodes(model, episodes))
+            tried[noise] = seen_object_mean_error(track_episodes(model, episodes))
         return tried[noise]
 
     best = (1.0, 1.0)
     for _ in range(rounds):
-        best = min(((value, best[1]) for value in NOISE_GRID), key=nll)
-        best = min(((best[0], value) for value in NOISE_GRID), key=nll)
+        best = min(((value, best[1]) for value in NOISE_GRID), key=error)
+        best = min(((best[0], value) for value in NOISE_GRID), key=error)
     model.use_measurement_noise(*best)
     return best, {f"{own:g} x {shared:g}": value for (own, shared), value in tried.items()}
 
@@ -420,7 +420,8 @@ def metrics(predictions: Predictions) -> dict[str, Any]:
     heading_mass = heading_central_mass(heading_error, p.kappa)
     groups = {"seen": p.present & p.seen, "all": p.present, "visible": p.present & p.visible,
               "unseen": p.present & ~p.seen,  # seen: at or before this frame; visible: now; unseen: not yet
-              "visible_in_reach": p.present & p.visible & (_object_distance(p) <= PICK_RANGE)}  # what PICK needs
+              "visible_in_reach": p.present & p.visible & (_object_distance(p) <= PICK_RANGE),  # what PICK needs
+              "seen_confusable": p.present & p.seen & p.confusable}  # sharing their colour, not held
     seen = groups["seen"]
     object_error = _object_error(p)
     nll = {

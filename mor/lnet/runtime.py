@@ -24,11 +24,10 @@ import torch
 
 from mor.data.observations import env_to_network
 from mor.errors import MorError
-from mor.lnet.calibration import CALIBRATION_FILE, Calibration, read_calibration
+from mor.lnet.calibration import CALIBRATION_FILE, Calibration, confusable, read_calibration
 from mor.lnet.checkpoint import load_checkpoint, model_from_checkpoint
 from mor.lnet.model import LNet, PoseEstimate
 from mor.lnet.params import LNetConfig
-from mor.sim.catalog import shares_colour
 from mor.sim.rules import N_ACTIONS
 
 
@@ -145,16 +144,17 @@ class LNetRunner:
         previous_actions (N,) the action taken before this frame, -1 at an episode's start.
         """
         tracked, state = self.track(images, object_classes, held, previous_actions, state)
-        return self.estimates(tracked, np.asarray(object_classes)), state
+        return self.estimates(tracked, np.asarray(object_classes), np.asarray(held)), state
 
-    def estimates(self, tracked: PoseEstimate, object_classes: np.ndarray) -> Estimates:
+    def estimates(self, tracked: PoseEstimate, object_classes: np.ndarray, held: np.ndarray) -> Estimates:
         """The last frame of the model's world-frame estimate (N, T, ...) for the n objects of
-        ``object_classes`` (N, n), calibrated, as numpy."""
+        ``object_classes`` (N, n), calibrated (``held`` (N,): which object each environment holds, n or -1 for
+        none), as numpy."""
         n_objects = object_classes.shape[1]
         last = PoseEstimate(*(getattr(tracked, name)[:, -1] for name in (
             "agent_mean", "agent_tril", "heading", "kappa")), tracked.object_mean[:, -1, :n_objects],
             tracked.object_tril[:, -1, :n_objects], frame=tracked.frame)
-        last = self.calibration.apply(last, shares_colour(torch.as_tensor(object_classes, device=self.device)))
+        last = self.calibration.apply(last, torch.as_tensor(confusable(object_classes, held), device=self.device))
         as_numpy = lambda t: t.float().cpu().numpy()  # noqa: E731
         return Estimates(as_numpy(last.agent_mean), _covariance(last.agent_tril), as_numpy(last.heading),
                          as_numpy(last.kappa), as_numpy(last.object_mean), _covariance(last.object_tril))

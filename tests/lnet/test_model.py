@@ -133,7 +133,7 @@ def _predictions(n: int, true_scale: float, stated_scale: float) -> Predictions:
         object_tril=np.broadcast_to(np.eye(2) * stated_scale, (n, 5, 2, 2)).copy(),
         present=np.tile([True, True, True, False, False], (n, 1)), visible=np.ones((n, 5), bool),
         since_seen=np.zeros((n, 5), int), sightings=np.ones((n, 5), int), held=np.full(n, -1),
-        episode=np.zeros(n, int), frame=np.arange(n), shared=np.zeros((n, 5), bool))
+        episode=np.zeros(n, int), frame=np.arange(n), confusable=np.zeros((n, 5), bool))
 
 
 def test_calibration_repairs_overconfidence() -> None:
@@ -143,28 +143,40 @@ def test_calibration_repairs_overconfidence() -> None:
     assert calibration.agent_scale == pytest.approx(2.0, rel=0.05)
     assert calibration.object_scale == pytest.approx(2.0, rel=0.05)
     assert calibration.kappa_scale == pytest.approx(0.25, rel=0.1)  # kappa 400 stated, 100 true
-    after = metrics(calibration.apply(predictions, predictions.shared))["coverage"]
+    after = metrics(calibration.apply(predictions, predictions.confusable))["coverage"]
     assert before < 0.5
     for k in (1, 2, 3):
         assert after["agent_position"][f"{k}sigma"] == pytest.approx(NOMINAL_2D[k], abs=0.03)
         assert after["objects_seen"][f"{k}sigma"] == pytest.approx(NOMINAL_2D[k], abs=0.03)
-    assert Calibration().apply(predictions, predictions.shared).agent_tril is not None
+    assert Calibration().apply(predictions, predictions.confusable).agent_tril is not None
 
 
 def test_objects_sharing_their_colour_get_their_own_scale() -> None:
     predictions = _predictions(4000, true_scale=0.2, stated_scale=0.1)
     shared = np.zeros((4000, 5), bool)
     shared[:, 0] = True  # slot 0 shares its colour; its errors are three times larger
-    predictions = replace(predictions, shared=shared, object_mean=predictions.object_mean + np.where(
+    predictions = replace(predictions, confusable=shared, object_mean=predictions.object_mean + np.where(
         shared[..., None], 2.0 * (predictions.object_mean - predictions.object_truth), 0.0))
     calibration = fit_calibration(predictions)
     assert calibration.object_scale == pytest.approx(2.0, rel=0.05)
     assert calibration.shared_colour_scale == pytest.approx(6.0, rel=0.05)
-    scaled = calibration.apply(predictions, predictions.shared).object_tril
+    scaled = calibration.apply(predictions, predictions.confusable).object_tril
     assert scaled[0, 0, 0, 0] == pytest.approx(0.6, rel=0.05) and scaled[0, 1, 0, 0] == pytest.approx(0.2, rel=0.05)
     for k in (1, 2, 3):  # each group honest, so all of them
-        after = metrics(calibration.apply(predictions, predictions.shared))["coverage"]["objects_seen"]
+        after = metrics(calibration.apply(predictions, predictions.confusable))["coverage"]["objects_seen"]
         assert after[f"{k}sigma"] == pytest.approx(NOMINAL_2D[k], abs=0.03)
+
+
+def test_an_object_sharing_its_colour_is_confusable_except_while_held() -> None:
+    from mor.lnet.calibration import confusable  # noqa: PLC0415
+
+    classes = np.array([2, 8, 0, -1, -1])  # a blue cube, a blue sphere, a red cube, two empty slots
+    held = np.array([-1, 1, 5])  # nothing, the sphere, none (the environments' convention: n)
+    assert confusable(classes, held).tolist() == [[True, True, False, False, False],
+                                                  [True, False, False, False, False],
+                                                  [True, True, False, False, False]]
+    per_env = confusable(np.stack([classes[:3], classes[:3]]), np.array([0, 3]))  # (N, n) with (N,)
+    assert per_env.tolist() == [[False, True, False], [True, True, False]]
 
 
 def test_coverage_by_sightings_bins_the_remembered_objects_by_how_often_they_were_in_view() -> None:

@@ -90,6 +90,6 @@ def test_predict_calibrate_and_score_whole_episodes(tiny_dataset: tuple, tmp_pat
     model = load_model(tmp_path / BEST, signature(CONFIG, version, 16), torch.device("cpu"))
     predictions = predict(model, root / "test", 10, torch.device("cpu"), progress=False)
     assert len(predictions.frame) == sum(r["n_frames"] for r in rows if r["split"] == "test")
-    result = metrics(fit_calibration(predictions).apply(predictions, predictions.shared))
+    result = metrics(fit_calibration(predictions).apply(predictions, predictions.confusable))
     assert 0.0 <= result["coverage"]["agent_position"]["2sigma"] <= 1.0
     assert result["agent_position_error_m"]["median"] >= 0.0
