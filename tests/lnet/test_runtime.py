@@ -81,6 +81,19 @@ def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration(conf
     np.testing.assert_allclose(estimates.heading_kappa, 3.0 * tracked.kappa[:, -1].numpy(), rtol=1e-5)
 
 
+def test_the_streaming_step_scales_confusable_objects_by_their_own_scale_unless_held() -> None:
+    runner = _runner(Calibration(object_scale=0.5, shared_colour_scale=2.0))
+    frame = _rollouts(n_envs=1, steps=1)[0]
+    classes = np.array([[2, 8]])  # a blue cube and a blue sphere: confusable
+    for held, scales in ((np.array([2]), (2.0, 2.0)), (np.array([1]), (2.0, 0.5))):  # nothing held; the sphere
+        tracked, _ = runner.track(frame["images"], classes, held, np.array([-1]), runner.initial_state(1))
+        estimates = runner.estimates(tracked, classes, held)
+        tril = tracked.object_tril[0, -1, :2]
+        stated = (tril @ tril.transpose(-1, -2)).numpy()
+        for k, scale in enumerate(scales):
+            np.testing.assert_allclose(estimates.object_cov[0, k], scale ** 2 * stated[k], rtol=1e-4, atol=1e-7)
+
+
 @pytest.mark.parametrize("config", TRACKERS, ids=["lstm", "filter"])
 def test_reset_restarts_only_the_environments_that_are_done(config: LNetConfig) -> None:
     runner = _runner(config=config)
