@@ -167,6 +167,9 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
         + (" Whole episodes are tracked with data association: a measurement that two slots claim (the PoseNet "
            "confuses objects of one colour) is shared by how well each belief explains it, and a doubtful update "
            "widens the belief (see 'Tracking rule' below)." if calibration.get("data_association") else "")
+        + (" Objects that share their colour with another object of the episode (which the PoseNet confuses) get "
+           "their own measurement noise and σ scale (see the calibration below and docs/assumptions.md)."
+           if calibration.get("shared_colour_scale") is not None else "")
         + (" The PoseNet has a visibility head (BCE) and its ego object NLL counts only frames where the object "
            "is visible." if params["model"].get("visibility") else ""), "",
         f"- Dataset version: `{metrics['dataset_version']}`; test split: {before['episodes']} episodes, "
@@ -233,7 +236,9 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
         lines += [f"## Ablation: tracker and visibility loss at an equal budget ({pretrain}{ablation['steps']} "
                   "window steps each, "
                   f"first {ablation['test_episodes']} test episodes, after calibration, {rule})", "",
-                  *ablation_table(ablation), "", f"![ablation]({figures['ablation']})", ""]
+                  *ablation_table(ablation), "", "'train s' is wall time; the variants may have shared the "
+                  "machine with other jobs, so it does not compare their costs.", "",
+                  f"![ablation]({figures['ablation']})", ""]
     lines += [
         "## What the estimates look like", "",
         "Ground truth as stars, estimated 2σ ellipses, the heading's 95% sector (grey):", "",
