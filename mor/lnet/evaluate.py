@@ -284,8 +284,8 @@ def fit_calibration(predictions: Predictions) -> Calibration:
                        shared_colour_scale=shared if own is not None else None)
 
 
-#: The measurement-noise multipliers ``fit_measurement_noise`` chooses from: powers of two, 1/16 to 64.
-NOISE_GRID = tuple(2.0 ** k for k in range(-4, 7))
+#: The measurement-noise multipliers ``fit_measurement_noise`` chooses from: powers of two, 1/64 to 64.
+NOISE_GRID = tuple(2.0 ** k for k in range(-6, 7))
 
 
 def seen_object_mean_error(predictions: Predictions) -> float:
