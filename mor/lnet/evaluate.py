@@ -265,8 +265,7 @@ def _scale(d2: np.ndarray) -> float | None:
 def fit_calibration(predictions: Predictions) -> Calibration:
     """Scales that minimize the NLL on ``predictions``: for a 2-D Gaussian scaled by s, the optimum is
     s^2 = mean(d^2) / 2, per group of objects (confusable: sharing their colour with another and not held; the
-    others); the heading's kappa
-    multiplier is found numerically. The tracking settings (rule, measurement noise) are left at their defaults:
+    others); the heading's kappa multiplier is found numerically. The tracking settings (rule, measurement noise) are left at their defaults:
     the caller records the ones the predictions were tracked with."""
     p = predictions
     agent_d2 = _d2(p.agent_pose[:, :2], p.agent_mean, p.agent_tril)
