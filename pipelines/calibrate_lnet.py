@@ -14,18 +14,10 @@ from typing import Any
 
 from mor.config import Profile
 from mor.lnet.calibration import check_scales
-from mor.lnet.evaluate import calibrate, frame_estimates, metrics
+from mor.lnet.evaluate import calibrate, frame_estimates, headline, metrics
 from pipelines import paths
 from pipelines.io import write_json
 from pipelines.lnet_io import load_trained
-
-
-def _headline(scored: dict[str, Any]) -> dict[str, Any]:
-    """The figures the model card compares the tracking rules by, from ``metrics``."""
-    errors = scored["object_position_error_m"]
-    return {"objects_seen_median_m": errors["seen"]["median"], "objects_visible_median_m": errors["visible"]["median"],
-            "agent_median_m": scored["agent_position_error_m"]["median"], "nll_objects": scored["nll"]["objects"],
-            "coverage_objects_seen": scored["coverage"]["objects_seen"]}
 
 
 def run(profile: Profile) -> dict[str, Any]:
@@ -48,7 +40,7 @@ def run(profile: Profile) -> dict[str, Any]:
                "validation_before": metrics(predictions)["coverage"],
                "validation_after": after[chosen]["coverage"],
                "tracking_rules": {("with" if rule else "without") + "_data_association": {
-                   **asdict(fitted), "validation_after": _headline(after[rule])}
+                   **asdict(fitted), "validation_after": headline(after[rule])}
                    for rule, (_, fitted, _) in fits.items()},
                "seconds": round(time.perf_counter() - started, 1)}
     write_json(paths.LNET_CALIBRATION, payload)

@@ -416,12 +416,17 @@ def bench_lnet(
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
-    """L-Net inference frames/s at batch 1 and 64, and its streaming step (eager and compiled) beside the
-    environments' own rendered steps at batch --n-envs in the same run (one torch thread, one render thread)."""
+    """L-Net inference frames/s at batch 1 and 64, and its streaming step (eager; compiled in float32 and with a
+    bfloat16 encoder) beside the environments' own rendered steps at batch --n-envs in the same run (one torch
+    thread, one render thread). The streaming step is the committed L-Net's with its calibration where
+    cards/lnet/model.pt exists (how far bfloat16 moves the estimates depends on the weights), else random weights."""
     os.environ.setdefault("LP_NUM_THREADS", "1")  # one llvmpipe render thread, as in mor bench sim
     import torch
 
     from mor.lnet.bench import benchmark_lnet, benchmark_streaming
+    from mor.lnet.calibration import Calibration
+    from mor.lnet.model import LNet
+    from mor.lnet.runtime import load_lnet
     from pipelines.io import write_json
 
     torch.set_num_threads(1)
@@ -429,13 +434,25 @@ def bench_lnet(
     result = benchmark_lnet(config.lnet.model, config.sim.image_size, [1, 64], repeats)
     for name, entry in result["results"].items():
         typer.echo(f"{name}: {entry['frames_per_s']:.0f} frames/s")
-    streaming = result["streaming"] = benchmark_streaming(config.lnet.model, config.sim, n_envs, steps, repeats,
-                                                          data_association=config.lnet.data_association)
+    committed = paths.LNET_CARD / "model.pt"
+    runner = load_lnet(committed) if committed.is_file() else None
+    if runner is not None and (runner.config, runner.image_size, runner.calibration.data_association) == (
+            config.lnet.model, config.sim.image_size, config.lnet.data_association):
+        model, calibration, weights = runner.model, runner.calibration, committed.as_posix()
+    else:  # none committed, or one of another config than this profile's
+        model, calibration = LNet(config.lnet.model), Calibration(data_association=config.lnet.data_association)
+        model.use_data_association(config.lnet.data_association)
+        weights = "random"
+    streaming = result["streaming"] = benchmark_streaming(model, calibration, config.sim, n_envs, steps, repeats)
+    streaming["weights"] = weights
     typer.echo(f"streaming at batch {n_envs}: L-Net {streaming['lnet_frames_per_s']:.0f} frames/s, environments "
                f"{streaming['env_frames_per_s']:.0f} frames/s, ratio {streaming['lnet_over_env']:.2f}")
-    fused = streaming["compiled"]
-    typer.echo(f"compiled step: L-Net {fused['lnet_frames_per_s']:.0f} frames/s, ratio {fused['lnet_over_env']:.2f} "
-               f"({fused['over_eager']:.2f}x the eager step; estimates within {fused['largest_difference']:.1e})")
+    for name in ("compiled", "compiled_bfloat16"):
+        fused = streaming[name]
+        typer.echo(f"{name} step: L-Net {fused['lnet_frames_per_s']:.0f} frames/s, ratio "
+                   f"{fused['lnet_over_env']:.2f} ({fused['over_eager']:.2f}x the eager step; estimates within "
+                   f"{fused['largest_difference']:.1e}, object means within "
+                   f"{fused['difference_by_array']['object_mean']:.1e} m)")
     typer.echo(f"wrote {write_json(out, result)}")
 
 

@@ -13,7 +13,7 @@ from mor.config import Profile
 from mor.data.manifest import manifest_version, read_manifest
 from mor.data.sequences import SequenceWindows
 from mor.lnet.card import read_json, render_model_card, write_model_card
-from mor.lnet.evaluate import Predictions, metrics, predict, predict_live, story
+from mor.lnet.evaluate import Predictions, headline, metrics, predict, predict_live, story
 from mor.lnet.figures import (
     write_estimate_gif,
     write_estimate_strip,
@@ -41,6 +41,13 @@ def run(profile: Profile) -> dict[str, Any]:
         return {"before_calibration": metrics(p), "after_calibration": metrics(calibration.apply(p, p.confusable))}
 
     result = {"dataset_version": manifest_version(manifest), "calibration": asdict(calibration), **scored(predictions)}
+    chosen = runner.encoder_precision  # the other precision on the same frames, for lnet.encoder_precision's choice
+    other = "bfloat16" if chosen == "float32" else "float32"
+    runner.model.use_encoder_precision(other)
+    reduced = predict(runner.model, paths.LEROBOT / "test", profile.lnet.eval_episodes, runner.device)
+    runner.model.use_encoder_precision(chosen)
+    result["encoder_precision"] = {chosen: headline(result["after_calibration"]),
+                                   other: headline(metrics(calibration.apply(reduced, reduced.confusable)))}
     # Real runs of the test split (its episodes are numbered in manifest order), reported on their own.
     test_sources = [row["source"] for row in manifest.to_pylist() if row["split"] == "test"]
     real = np.isin(predictions.episode, [i for i, source in enumerate(test_sources) if source == "real"])

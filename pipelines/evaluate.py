@@ -11,7 +11,7 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-from mor.config import Profile
+from mor.config import Profile, load_profile
 from mor.data.parallel import unordered_map
 from mor.errors import ConfigError
 from mor.eval.card import write_results_card
@@ -163,28 +163,36 @@ def collect_results(profile_name: str) -> Path:
     return path
 
 
+def workspace_profile(workspace: Path, profile_name: str) -> Profile:
+    """Profile ``profile_name`` as ``workspace`` (".": the main one, or ``settings/NAME``) sees it."""
+    return settings.setting_profile(workspace.name, profile_name) if workspace != Path(".") else \
+        load_profile(profile_name)
+
+
 def lnet_card(workspace: Path, profile_name: str) -> Path:
     """The folder of the L-Net the L-Net rows of ``workspace`` observe through: the setting's own, or the main one
     where the setting says ``lnet_from_main`` (and for the main workspace, ".")."""
-    setting = settings.setting_profile(workspace.name, profile_name).setting if workspace != Path(".") else None
+    setting = workspace_profile(workspace, profile_name).setting
     own = setting is not None and not setting.lnet_from_main
     return workspace / paths.LNET_CARD if own else paths.LNET_CARD
 
 
-def _identity(card: Path) -> str:
-    """The identity of the L-Net in ``card`` (``collect_results`` reads each card's checkpoint once per call)."""
+def _identity(card: Path, encoder_precision: str) -> str:
+    """The identity of the L-Net in ``card`` loaded with ``encoder_precision`` (``collect_results`` reads each
+    card's checkpoint once per call)."""
     from mor.lnet.runtime import checkpoint_identity  # noqa: PLC0415 - torch only where needed
 
-    return checkpoint_identity(card / "model.pt")
+    return checkpoint_identity(card / "model.pt", encoder_precision)
 
 
-def stale(row: dict[str, Any], profile_name: str, identity: Callable[[Path], str] = _identity) -> bool:
+def stale(row: dict[str, Any], profile_name: str, identity: Callable[[Path, str], str] = _identity) -> bool:
     """Whether ``row`` was played by other policies or through another L-Net than the ones committed now: an L-Net
     row whose ``lnet_version`` is not the identity of its workspace's L-Net (``lnet_card``; a row from before rows
     recorded it counts as stale), or a row whose recorded policy digests differ from its policy files'."""
     method, workspace = method_spec(row["method"]), Path(row.get("workspace", "."))
     played_by = row.get("played_by") or {}
-    if method.uses_lnet and played_by.get("lnet_version") != identity(lnet_card(workspace, profile_name)):
+    precision = workspace_profile(workspace, profile_name).lnet.encoder_precision
+    if method.uses_lnet and played_by.get("lnet_version") != identity(lnet_card(workspace, profile_name), precision):
         return True
     if not played_by.get("policies"):
         return False

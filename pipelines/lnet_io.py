@@ -14,6 +14,8 @@ from pipelines import paths
 
 def load_trained(profile: Profile, checkpoint: Path, calibrated: bool = True) -> LNetRunner:
     """``load_lnet`` of ``checkpoint``, refusing one made with another model config, dataset version or image
-    size than this profile and the current manifest, or calibrated for another ``lnet.data_association``."""
+    size than this profile and the current manifest, or calibrated for another ``lnet.data_association``; with
+    the profile's ``lnet.encoder_precision``."""
     expected = signature(profile.lnet.model, manifest_version(read_manifest(paths.MANIFEST)), profile.sim.image_size)
-    return load_lnet(checkpoint, pick_device(), expected, calibrated, data_association=profile.lnet.data_association)
+    return load_lnet(checkpoint, pick_device(), expected, calibrated, data_association=profile.lnet.data_association,
+                     encoder_precision=profile.lnet.encoder_precision)

@@ -24,7 +24,7 @@ PUBLISHED = (POLICY_FILE, "meta.json", "summary.json", "log.csv", "learning_curv
 
 def lnet_runner(variant: Variant, profile: Profile) -> Any:
     """The committed L-Net (``cards/lnet/model.pt`` + calibration; the main workspace's where the setting says
-    ``lnet_from_main``; compiled when the profile's ``lnet.compile_step``) for the L-Net variants; None for
+    ``lnet_from_main``; compiled when the profile's ``lnet.compile_step``, with its ``lnet.encoder_precision``) for the L-Net variants; None for
     gt_pose."""
     if variant == "gt_pose":
         return None
@@ -32,7 +32,8 @@ def lnet_runner(variant: Variant, profile: Profile) -> Any:
 
     from_main = profile.setting is not None and profile.setting.lnet_from_main
     return load_lnet((paths.MAIN / paths.LNET_CARD if from_main else paths.LNET_CARD) / "model.pt",
-                     compiled=profile.lnet.compile_step, data_association=profile.lnet.data_association)
+                     compiled=profile.lnet.compile_step, data_association=profile.lnet.data_association,
+                     encoder_precision=profile.lnet.encoder_precision)
 
 
 def starting_policy(profile: Profile, variant: Variant, task: Task) -> Path | None:

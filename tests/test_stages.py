@@ -66,6 +66,11 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     metrics = json.loads((card / "metrics.json").read_text())
     assert set(metrics) >= {"before_calibration", "after_calibration", "dataset_version", "oracle", "real"}
     assert metrics["oracle"]["after_calibration"]["episodes"] == tiny["lnet"]["oracle_episodes"]
+    # the same test frames through a bfloat16 encoder, beside the profile's float32, in the card
+    assert set(metrics["encoder_precision"]) == {"float32", "bfloat16"}
+    assert metrics["encoder_precision"]["float32"]["objects_seen_median_m"] == metrics["after_calibration"][
+        "object_position_error_m"]["seen"]["median"]
+    assert "## Encoder precision" in (card / "README.md").read_text()
     for name in ("README.md", "model.pt", "reliability.png", "estimates_strip.png", "estimates.gif", "since_seen.png"):
         assert (card / name).is_file(), name
 

@@ -2,12 +2,14 @@
 
 Two measurements: the model's single-frame step at several batch sizes on random frames, and the streaming step
 (``LNetRunner.step``, observations converted included) at batch N beside N environments' own rendered steps in
-the same loop and process, each timed separately (frames/s each and their ratio). Weights are random: the cost
-does not depend on them.
+the same loop and process, each timed separately (frames/s each and their ratio). The cost does not depend on
+the weights; how far a bfloat16 encoder moves the estimates does, so the streaming step is given its model (the
+command passes the committed one where there is one).
 """
 
 from __future__ import annotations
 
+import copy
 import os
 import platform
 import statistics
@@ -65,28 +67,33 @@ def benchmark_lnet(config: LNetConfig, image_size: int, batch_sizes: list[int], 
             "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}}
 
 
-def benchmark_streaming(config: LNetConfig, sim: SimConfig, n_envs: int, steps: int, repeats: int,
-                        seed: int = 0, compiled: bool = True, data_association: bool = False) -> dict[str, Any]:
-    """The environments' rendered steps and the L-Net's streaming step over the same ``n_envs`` envs (random
+def benchmark_streaming(model: LNet, calibration: Calibration, sim: SimConfig, n_envs: int, steps: int,
+                        repeats: int, seed: int = 0, compiled: bool = True) -> dict[str, Any]:
+    """The environments' rendered steps and ``model``'s streaming step over the same ``n_envs`` envs (random
     actions, resets included): median frames/s of each over ``repeats`` runs of ``steps`` vector steps, and
     ``lnet_over_env`` = L-Net frames/s / environment frames/s (>= 1: the L-Net is not the bottleneck).
 
-    The step runs eagerly and, with ``compiled``, also through ``torch.compile`` (same weights, same frames, timed
-    separately in the same loop): ``compiled`` holds its frames/s, ratio, runs, the largest difference of its
-    estimates from the eager step's (headings wrapped), and the warm-up run's seconds (the compilation).
-    data_association: the filter tracks with it (``mor.lnet.filter``), as the profile's policy stages do."""
+    The step runs eagerly (float32, as trained) and, with ``compiled``, also through ``torch.compile`` in float32
+    (``compiled``) and with a bfloat16 encoder (``compiled_bfloat16``, ``LNet.use_encoder_precision``): the same
+    weights and frames, each timed separately in the same loop. Each of those holds its frames/s, ratio, runs,
+    the largest difference of its estimates from the eager step's, over all arrays and per array
+    (``difference_by_array``: metres, radians; headings wrapped), and the warm-up run's seconds (the
+    compilation). The model keeps its tracking settings (data association, noise); ``calibration`` is applied."""
     envs = [gym.make(STREAMING_ENV, **sim.model_dump()) for _ in range(n_envs)]
-    model = LNet(config)
-    model.use_data_association(data_association)
-    runners = {"eager": LNetRunner(model, Calibration(), sim.image_size, "benchmark")}
+    model = model.eval()
+    runners = {"eager": LNetRunner(model, calibration, sim.image_size, "benchmark")}
     if compiled:
-        runners["compiled"] = LNetRunner(model, Calibration(), sim.image_size, "benchmark", compiled=True)
+        runners["compiled"] = LNetRunner(model, calibration, sim.image_size, "benchmark", compiled=True)
+        reduced = copy.deepcopy(model)
+        reduced.use_encoder_precision("bfloat16")
+        runners["compiled_bfloat16"] = LNetRunner(reduced, calibration, sim.image_size, "benchmark", compiled=True)
     rng = np.random.default_rng(seed)
     observations = [env.reset(seed=seed + i)[0] for i, env in enumerate(envs)]
     states = {name: runner.initial_state(n_envs) for name, runner in runners.items()}
     previous = np.full(n_envs, -1)
     env_rates, lnet_rates = [], {name: [] for name in runners}
-    warm_up_seconds, largest_difference = 0.0, 0.0
+    warm_up_seconds = dict.fromkeys(runners, 0.0)
+    differences: dict[str, dict[str, float]] = {name: {} for name in runners if name != "eager"}
     for run in range(repeats + 1):  # run 0 warms up (and compiles)
         env_seconds, lnet_seconds = 0.0, dict.fromkeys(runners, 0.0)
         for _ in range(steps):
@@ -97,9 +104,9 @@ def benchmark_streaming(config: LNetConfig, sim: SimConfig, n_envs: int, steps: 
                 start = time.perf_counter()
                 estimates[name], states[name] = runner.step(*inputs, states[name])
                 lnet_seconds[name] += time.perf_counter() - start
-            if compiled:
-                largest_difference = max(largest_difference, _largest_difference(estimates["eager"],
-                                                                                  estimates["compiled"]))
+            for name, largest in differences.items():
+                for array, value in _differences(estimates["eager"], estimates[name]).items():
+                    largest[array] = max(largest.get(array, 0.0), value)
             actions = rng.integers(0, N_ACTIONS, n_envs)
             done = np.zeros(n_envs, dtype=bool)
             start = time.perf_counter()
@@ -111,9 +118,9 @@ def benchmark_streaming(config: LNetConfig, sim: SimConfig, n_envs: int, steps: 
             env_seconds += time.perf_counter() - start
             states = {name: runners[name].reset(state, done) for name, state in states.items()}
             previous = np.where(done, -1, actions)
-        if not run and compiled:
-            warm_up_seconds = lnet_seconds["compiled"]
-        if run:
+        if not run:
+            warm_up_seconds = lnet_seconds
+        else:
             env_rates.append(n_envs * steps / env_seconds)
             for name in runners:
                 lnet_rates[name].append(n_envs * steps / lnet_seconds[name])
@@ -125,19 +132,21 @@ def benchmark_streaming(config: LNetConfig, sim: SimConfig, n_envs: int, steps: 
               "env_frames_per_s": env_rate, "lnet_frames_per_s": rates["eager"],
               "lnet_over_env": rates["eager"] / env_rate, "runs_env": env_rates, "runs_lnet": lnet_rates["eager"],
               "torch_threads": torch.get_num_threads(), "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS"),
-              "data_association": data_association, "sim": sim.model_dump()}
-    if compiled:
-        result["compiled"] = {"lnet_frames_per_s": rates["compiled"], "lnet_over_env": rates["compiled"] / env_rate,
-                              "over_eager": rates["compiled"] / rates["eager"], "runs_lnet": lnet_rates["compiled"],
-                              "largest_difference": largest_difference, "warm_up_seconds": warm_up_seconds}
+              "data_association": model.config.tracker == "filter" and model.filter.data_association,
+              "sim": sim.model_dump()}
+    for name, largest in differences.items():
+        result[name] = {"lnet_frames_per_s": rates[name], "lnet_over_env": rates[name] / env_rate,
+                        "over_eager": rates[name] / rates["eager"], "runs_lnet": lnet_rates[name],
+                        "largest_difference": max(largest.values()), "difference_by_array": largest,
+                        "warm_up_seconds": warm_up_seconds[name]}
     return result
 
 
-def _largest_difference(first: Estimates, second: Estimates) -> float:
-    """The largest absolute difference between two ``Estimates`` of the same frames, over all their arrays
-    (headings on the circle)."""
+def _differences(first: Estimates, second: Estimates) -> dict[str, float]:
+    """Per array of two ``Estimates`` of the same frames, the largest absolute difference (headings on the
+    circle)."""
     def difference(name: str) -> np.ndarray:
         delta = getattr(first, name) - getattr(second, name)
         return np.abs(wrap_angle(delta) if name == "heading" else delta)
 
-    return max(float(np.max(difference(f.name))) for f in fields(first))
+    return {f.name: float(np.max(difference(f.name))) for f in fields(first)}

@@ -121,19 +121,33 @@ def _object_calibration(calibration: dict[str, Any]) -> str:
             "(shared colour), chosen from powers of two by the validation error of the objects seen earlier")
 
 
+_HEADLINE_COLUMNS = ("objects seen earlier, median (m) | in view, median (m) | agent, median (m) | object NLL | "
+                     "objects seen earlier, 1σ / 2σ / 3σ")
+
+
+def _headline_cells(r: dict[str, Any]) -> str:
+    """The cells of ``_HEADLINE_COLUMNS`` from a ``mor.lnet.evaluate.headline``."""
+    coverage = " / ".join(f"{r['coverage_objects_seen'][f'{k}sigma']:.3f}" for k in (1, 2, 3))
+    return (f"{r['objects_seen_median_m']:.3f} | {r['objects_visible_median_m']:.3f} | {r['agent_median_m']:.3f} | "
+            f"{r['nll_objects']:.3f} | {coverage}")
+
+
 def tracking_rule_table(rules: dict[str, dict[str, Any]]) -> list[str]:
     """One row per tracking rule of ``calibration.json``'s ``tracking_rules``: errors, NLL and coverage on
     validation after that rule's own calibration."""
-    rows = ["| rule | objects seen earlier, median (m) | in view, median (m) | agent, median (m) | object NLL | "
-            "objects seen earlier, 1σ / 2σ / 3σ | objects σ × (own / shared colour) | measurement noise × (own / "
+    rows = [f"| rule | {_HEADLINE_COLUMNS} | objects σ × (own / shared colour) | measurement noise × (own / "
             "shared colour) |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name, rule in rules.items():
-        r = rule["validation_after"]
-        coverage = " / ".join(f"{r['coverage_objects_seen'][f'{k}sigma']:.3f}" for k in (1, 2, 3))
-        rows.append(f"| {name.replace('_', ' ')} | {r['objects_seen_median_m']:.3f} | "
-                    f"{r['objects_visible_median_m']:.3f} | {r['agent_median_m']:.3f} | {r['nll_objects']:.3f} | "
-                    f"{coverage} | {rule['object_scale']:.3f} / {_number(rule.get('shared_colour_scale'), 3)} | "
+        rows.append(f"| {name.replace('_', ' ')} | {_headline_cells(rule['validation_after'])} | "
+                    f"{rule['object_scale']:.3f} / {_number(rule.get('shared_colour_scale'), 3)} | "
                     f"{rule.get('noise_own', 1.0):g} / {rule.get('noise_shared', 1.0):g} |")
+    return rows
+
+
+def precision_table(precisions: dict[str, dict[str, Any]]) -> list[str]:
+    """One row per encoder precision of ``metrics.json``'s ``encoder_precision`` (test split, after calibration)."""
+    rows = [f"| encoder | {_HEADLINE_COLUMNS} | heading, median (°) |", "| --- | --- | --- | --- | --- | --- | --- |"]
+    rows += [f"| {name} | {_headline_cells(r)} | {r['heading_median_deg']:.2f} |" for name, r in precisions.items()]
     return rows
 
 
@@ -229,6 +243,11 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
                   "the measurement noise and the scales for each, and keeps the profile's `lnet.data_association`.",
                   "",
                   *tracking_rule_table(calibration["tracking_rules"]), ""]
+    if metrics.get("encoder_precision"):
+        lines += ["## Encoder precision (test split, after calibration)", "",
+                  "The same weights and calibration with the image encoder in float32 (as trained) and in bfloat16 "
+                  "(`lnet.encoder_precision`; the heads and the tracker stay float32). `mor bench lnet` times both.",
+                  "", *precision_table(metrics["encoder_precision"]), ""]
     if ablation:
         rule = ("the filter variants tracked with data association" if ablation.get("data_association") else
                 "tracked without data association")

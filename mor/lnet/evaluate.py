@@ -457,3 +457,12 @@ def metrics(predictions: Predictions) -> dict[str, Any]:
         "coverage": coverage,
         "reliability": reliability,
     }
+
+
+def headline(scored: dict[str, Any]) -> dict[str, Any]:
+    """The figures the model card compares tracking rules and encoder precisions by, from ``metrics``."""
+    errors = scored["object_position_error_m"]
+    return {"objects_seen_median_m": errors["seen"]["median"], "objects_visible_median_m": errors["visible"]["median"],
+            "agent_median_m": scored["agent_position_error_m"]["median"],
+            "heading_median_deg": scored["heading_error_deg"]["median"], "nll_objects": scored["nll"]["objects"],
+            "coverage_objects_seen": scored["coverage"]["objects_seen"]}

@@ -146,10 +146,13 @@ class PoseNet(nn.Module):
             self.attention = ObjectAttention(self.encoder.channels, config.class_embedding_dim)
             object_inputs += self.encoder.channels
         self.object_head = _mlp(object_inputs, config.mlp_hidden, 6 if config.visibility else 5)
+        self.encoder_bfloat16 = False  # an inference setting: LNet.use_encoder_precision
 
     def forward(self, images: torch.Tensor, classes: torch.Tensor) -> PoseEstimate:
         """images (N, 3, H, W), classes (N, K) -> PoseEstimate with leading dim N (objects in the ego frame)."""
-        features, spatial = self.encoder.encode(images)
+        with torch.autocast(images.device.type, torch.bfloat16, enabled=self.encoder_bfloat16):
+            features, spatial = self.encoder.encode(images)
+        features, spatial = features.float(), spatial.float()  # no-ops in float32
         mean, tril, heading, kappa = _agent_distribution(self.agent_head(features))
         embedded = self.embed(torch.where(classes >= 0, classes, torch.full_like(classes, _ABSENT)))
         object_inputs = [features.unsqueeze(1).expand(-1, K, -1), embedded]
@@ -203,6 +206,13 @@ class LNet(nn.Module):
             self.filter.measurement_noise = (float(own), float(shared))
         elif (own, shared) != (1.0, 1.0):
             raise ValueError("measurement-noise multipliers need the filter tracker; this model's tracker is the LSTM")
+
+    def use_encoder_precision(self, precision: str) -> None:
+        """The image encoder's arithmetic: ``float32`` (as trained) or ``bfloat16`` (``torch.autocast`` around the
+        encoder only; the heads and the tracker stay float32). Anything else is a ValueError."""
+        if precision not in ("float32", "bfloat16"):
+            raise ValueError(f"encoder precision: expected float32 or bfloat16, got {precision!r}")
+        self.posenet.encoder_bfloat16 = precision == "bfloat16"
 
     def use_data_association(self, on: bool) -> None:
         """Track with the filter's data association (``mor.lnet.filter``) or without; ``on`` with the LSTM tracker

@@ -84,6 +84,11 @@ class LNetParams(BaseModel):
     compile_step: bool = Field(False, description="the policy stages run the L-Net's streaming step through "
                                "torch.compile: about 1.3x faster on CPU (mor bench lnet), estimates equal up to "
                                "float rounding, about a minute to compile once per process (docs/performance.md)")
+    encoder_precision: Literal["float32", "bfloat16"] = Field(
+        "float32", description="arithmetic of the image encoder when the L-Net is loaded for inference (load_lnet): "
+        "bfloat16 (torch.autocast; the rest of the step stays float32) made the compiled step 1.3x faster on a CPU "
+        "with bfloat16 instructions and moved the estimates by up to 2 cm (mor bench lnet, docs/performance.md); "
+        "part of the L-Net's identity, so policies trained through one precision are stale under the other")
     data_association: bool = Field(False, description="track whole episodes with the filter's data association "
                                    "(mor.lnet.filter: a measurement two slots claim is shared by how well each belief "
                                    "explains it, and doubtful updates widen the belief); a tracking-time rule, not "

@@ -83,7 +83,12 @@ class LNetRunner:
     @property
     def identity(self) -> str:
         """What a policy trained through this L-Net records (``lnet_version``): ``lnet_identity``."""
-        return lnet_identity(self.dataset_version, self.checkpoint_digest, self.calibration)
+        return lnet_identity(self.dataset_version, self.checkpoint_digest, self.calibration, self.encoder_precision)
+
+    @property
+    def encoder_precision(self) -> str:
+        """The image encoder's arithmetic (``LNet.use_encoder_precision``): float32 or bfloat16."""
+        return "bfloat16" if self.model.posenet.encoder_bfloat16 else "float32"
 
     @property
     def config(self) -> LNetConfig:
@@ -161,14 +166,16 @@ class LNetRunner:
 
 
 def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str, Any] | None = None,
-              calibrated: bool = True, compiled: bool = False, data_association: bool | None = None) -> LNetRunner:
+              calibrated: bool = True, compiled: bool = False, data_association: bool | None = None,
+              encoder_precision: str = "float32") -> LNetRunner:
     """The trained L-Net at ``path`` with the calibration stored beside it (``calibration.json``).
 
     expected: a ``mor.lnet.checkpoint.signature`` (or part of one) the checkpoint must match: another tracker,
     config, dataset version or image size is one clear error naming both sides. calibrated=False: identity scales
     (what the calibration stage itself needs). compiled: the streaming step through ``torch.compile``.
     data_association: the tracking rule (``mor.lnet.filter``); None: the one the calibration was fitted for (none
-    when uncalibrated); given with a calibration fitted for the other rule, one clear error.
+    when uncalibrated); given with a calibration fitted for the other rule, one clear error. encoder_precision:
+    float32 (as trained) or bfloat16 (``LNet.use_encoder_precision``).
     """
     path = Path(path)
     saved = load_checkpoint(path, expected or {}, device)
@@ -182,18 +189,20 @@ def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str
     model = model_from_checkpoint(saved, device)
     model.use_data_association(calibration.data_association)
     model.use_measurement_noise(calibration.noise_own, calibration.noise_shared)
+    model.use_encoder_precision(encoder_precision)
     return LNetRunner(model, calibration, int(saved["image_size"]), version, device, file_digest(path), compiled)
 
 
-def lnet_identity(dataset_version: str, checkpoint_digest: str | None, calibration: Calibration) -> str:
+def lnet_identity(dataset_version: str, checkpoint_digest: str | None, calibration: Calibration,
+                  encoder_precision: str = "float32") -> str:
     """The dataset version; for a loaded checkpoint, the first 12 hex digits of its file's SHA-256 (another training
-    run is another L-Net); and, unless it is the identity calibration, ``-cal`` and 8 hex digits of the calibration
-    (another tracking rule or other scales give other estimates: what a policy reads changes)."""
+    run is another L-Net); unless it is the identity calibration, ``-cal`` and 8 hex digits of the calibration
+    (another tracking rule or other scales give other estimates: what a policy reads changes); and ``-bf16`` for
+    a bfloat16 encoder (its estimates differ a little from float32's)."""
     identity = dataset_version if checkpoint_digest is None else f"{dataset_version}-{checkpoint_digest}"
-    if calibration == Calibration():
-        return identity
-    digest = hashlib.sha256(json.dumps(asdict(calibration), sort_keys=True).encode()).hexdigest()[:8]
-    return f"{identity}-cal{digest}"
+    if calibration != Calibration():
+        identity += "-cal" + hashlib.sha256(json.dumps(asdict(calibration), sort_keys=True).encode()).hexdigest()[:8]
+    return identity + ("-bf16" if encoder_precision == "bfloat16" else "")
 
 
 def file_digest(path: Path) -> str:
@@ -202,12 +211,12 @@ def file_digest(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:12]
 
 
-def checkpoint_identity(path: Path) -> str:
-    """``LNetRunner.identity`` of the checkpoint at ``path`` without building the model: what a policy trained or
-    a row evaluated through it records as ``lnet_version``."""
+def checkpoint_identity(path: Path, encoder_precision: str = "float32") -> str:
+    """``LNetRunner.identity`` of the checkpoint at ``path`` (loaded with ``encoder_precision``) without building
+    the model: what a policy trained or a row evaluated through it records as ``lnet_version``."""
     path = Path(path)
     saved = load_checkpoint(path, {}, "cpu")
     version = str(saved["dataset_version"])
     beside = path.parent / CALIBRATION_FILE
     return lnet_identity(version, file_digest(path), read_calibration(beside, version) if beside.is_file()
-                         else Calibration())
+                         else Calibration(), encoder_precision)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from mor.lnet.card import tracking_rule_table
+from mor.lnet.card import precision_table, tracking_rule_table
 
 
 def test_the_tracking_rule_table_has_one_row_per_rule_from_its_own_calibration() -> None:
@@ -18,3 +18,13 @@ def test_the_tracking_rule_table_has_one_row_per_rule_from_its_own_calibration()
     assert rows[2] == ("| with data association | 0.200 | 0.250 | 0.120 | 1.600 | 0.740 / 0.939 / 0.965 | 1.280 / "
                        "0.900 | 0.25 / 32 |")
     assert rows[3].startswith("| without data association | 0.216 |") and rows[3].endswith("| 2.149 / – | 1 / 1 |")
+
+
+def test_the_precision_table_has_one_row_per_encoder_precision() -> None:
+    scored = {"objects_seen_median_m": 0.18, "objects_visible_median_m": 0.22, "agent_median_m": 0.12,
+              "heading_median_deg": 1.375, "nll_objects": 1.0,
+              "coverage_objects_seen": {"1sigma": 0.57, "2sigma": 0.9, "3sigma": 0.98}}
+    rows = precision_table({"float32": scored, "bfloat16": {**scored, "objects_seen_median_m": 0.19}})
+    assert len(rows) == 4 and rows[0].count("|") == rows[1].count("|") == rows[3].count("|")
+    assert rows[2] == "| float32 | 0.180 | 0.220 | 0.120 | 1.000 | 0.570 / 0.900 / 0.980 | 1.38 |"
+    assert rows[3].startswith("| bfloat16 | 0.190 |")

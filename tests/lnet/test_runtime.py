@@ -159,6 +159,26 @@ def test_the_committed_model_loads_with_one_call_and_checks_what_it_was_made_wit
     assert runner.identity.startswith(saved["dataset_version"] + "-") and other_runner.identity != runner.identity
 
 
+def test_a_bfloat16_encoder_moves_the_estimates_by_centimetres_and_is_another_identity(repo_root: Path) -> None:
+    committed = repo_root / "cards" / "lnet" / "model.pt"
+    full, reduced = load_lnet(committed), load_lnet(committed, encoder_precision="bfloat16")
+    envs = [gym.make("MOR/Rearrange-v0", image_size=full.image_size) for _ in range(2)]
+    observations = [env.reset(seed=i)[0] for i, env in enumerate(envs)]
+    states, previous, rng = [full.initial_state(2), reduced.initial_state(2)], np.full(2, -1), np.random.default_rng(0)
+    for _ in range(4):
+        inputs = (np.stack([o["image"] for o in observations]), np.stack([o["object_classes"] for o in observations]),
+                  np.array([o["held"] for o in observations]), previous)
+        (first, states[0]), (second, states[1]) = full.step(*inputs, states[0]), reduced.step(*inputs, states[1])
+        previous = rng.integers(0, 3, 2)  # moves and turns: no episode ends
+        observations = [env.step(int(a))[0] for env, a in zip(envs, previous, strict=True)]
+    difference = np.abs(first.object_mean - second.object_mean).max()
+    assert 0 < difference < 0.1  # m: bfloat16 arithmetic, not another model
+    assert reduced.encoder_precision == "bfloat16" and reduced.identity == full.identity + "-bf16"
+    assert checkpoint_identity(committed, "bfloat16") == reduced.identity
+    with pytest.raises(ValueError, match="expected float32 or bfloat16, got 'float16'"):
+        full.model.use_encoder_precision("float16")
+
+
 def test_the_tracking_rule_follows_the_calibration_and_a_mismatch_is_one_clear_error(tmp_path: Path) -> None:
     config = SMALL.model_copy(update={"tracker": "filter", "visibility": True})
     checkpoint = tmp_path / "model.pt"
@@ -204,12 +224,16 @@ def test_streaming_benchmark_times_the_environments_and_the_lnet_in_one_run() ->
     from mor.lnet.bench import benchmark_streaming  # noqa: PLC0415
     from mor.sim.config import SimConfig  # noqa: PLC0415
 
-    result = benchmark_streaming(SMALL, SimConfig(image_size=SIZE, n_objects=2), n_envs=2, steps=3, repeats=2)
+    result = benchmark_streaming(LNet(SMALL), Calibration(), SimConfig(image_size=SIZE, n_objects=2), n_envs=2,
+                                 steps=3, repeats=2)
     assert len(result["runs_env"]) == len(result["runs_lnet"]) == len(result["compiled"]["runs_lnet"]) == 2
     assert result["lnet_over_env"] == pytest.approx(result["lnet_frames_per_s"] / result["env_frames_per_s"])
-    assert result["compiled"]["lnet_over_env"] == pytest.approx(
-        result["compiled"]["lnet_frames_per_s"] / result["env_frames_per_s"])
+    for name in ("compiled", "compiled_bfloat16"):
+        assert result[name]["lnet_over_env"] == pytest.approx(
+            result[name]["lnet_frames_per_s"] / result["env_frames_per_s"])
+        assert result[name]["largest_difference"] == max(result[name]["difference_by_array"].values())
     assert result["compiled"]["largest_difference"] < 1e-4  # the compiled step computes the same estimates
+    assert result["compiled_bfloat16"]["difference_by_array"]["object_mean"] > 0  # bfloat16 is not float32
 
 
 def test_live_oracle_episodes_are_scored_like_the_test_split() -> None:
