@@ -12,6 +12,7 @@ import numpy as np
 from mor.config import Profile
 from mor.data.manifest import manifest_version, read_manifest
 from mor.data.sequences import SequenceWindows
+from mor.lnet.calibration import calibration_from_values
 from mor.lnet.card import read_json, render_model_card, write_model_card
 from mor.lnet.evaluate import Predictions, headline, metrics, predict, predict_live, story
 from mor.lnet.figures import (
@@ -48,6 +49,9 @@ def run(profile: Profile) -> dict[str, Any]:
     runner.model.use_encoder_precision(chosen)
     result["encoder_precision"] = {chosen: headline(result["after_calibration"]),
                                    other: headline(metrics(calibration.apply(reduced, reduced.confusable)))}
+    criteria = read_json(paths.LNET_CALIBRATION).get("criteria", {})  # each criterion's scales, on the test split
+    result["calibration_criteria"] = {name: headline(metrics(calibration_from_values(values).apply(
+        predictions, predictions.confusable))) for name, values in criteria.items()}
     # Real runs of the test split (its episodes are numbered in manifest order), reported on their own.
     test_sources = [row["source"] for row in manifest.to_pylist() if row["split"] == "test"]
     real = np.isin(predictions.episode, [i for i, source in enumerate(test_sources) if source == "real"])

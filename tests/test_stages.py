@@ -71,6 +71,14 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     assert metrics["encoder_precision"]["float32"]["objects_seen_median_m"] == metrics["after_calibration"][
         "object_position_error_m"]["seen"]["median"]
     assert "## Encoder precision" in (card / "README.md").read_text()
+    # both calibration criteria fitted on validation and scored on test; the profile's (nll) is the one used
+    calibration = json.loads((workspace / "datasets/lnet/calibration.json").read_text())
+    assert calibration["criterion"] == "nll" and set(calibration["criteria"]) == {"nll", "coverage"}
+    assert calibration["criteria"]["nll"]["object_scale"] == calibration["object_scale"]
+    assert set(metrics["calibration_criteria"]) == {"nll", "coverage"}
+    assert metrics["calibration_criteria"]["nll"]["coverage_heading"] == metrics["after_calibration"]["coverage"][
+        "heading"]
+    assert "| nll (used) |" in (card / "README.md").read_text()
     for name in ("README.md", "model.pt", "reliability.png", "estimates_strip.png", "estimates.gif", "since_seen.png"):
         assert (card / name).is_file(), name
 

@@ -64,14 +64,7 @@ def read_calibration(path: Path, dataset_version: str | None = None) -> Calibrat
     records a dataset version other than ``dataset_version`` (the checkpoint's)."""
     try:
         values = json.loads(Path(path).read_text())
-        shared = values.get("shared_colour_scale")
-        calibration = Calibration(*(float(values[key]) for key in ("agent_scale", "object_scale", "kappa_scale")),
-                                  data_association=values.get("data_association", False),
-                                  shared_colour_scale=None if shared is None else float(shared),
-                                  noise_own=float(values.get("noise_own", 1.0)),
-                                  noise_shared=float(values.get("noise_shared", 1.0)))
-        if not isinstance(calibration.data_association, bool):
-            raise TypeError(f"data_association must be true or false, got {calibration.data_association!r}")
+        calibration = calibration_from_values(values)
     except FileNotFoundError:
         raise MorError(f"{path}: no calibration beside the checkpoint; run mor calibrate-lnet") from None
     except (ValueError, KeyError, TypeError) as error:
@@ -82,6 +75,20 @@ def read_calibration(path: Path, dataset_version: str | None = None) -> Calibrat
         raise MorError(f"{path}: calibration dataset_version is {fitted_on} but the checkpoint's is {dataset_version}; "
                        "run mor calibrate-lnet for this checkpoint")
     check_scales(calibration, path)
+    return calibration
+
+
+def calibration_from_values(values: dict[str, Any]) -> Calibration:
+    """The ``Calibration`` a ``calibration.json`` (or one of its ``criteria``) records; ValueError, KeyError or
+    TypeError where a field is missing or of the wrong kind."""
+    shared = values.get("shared_colour_scale")
+    calibration = Calibration(*(float(values[key]) for key in ("agent_scale", "object_scale", "kappa_scale")),
+                              data_association=values.get("data_association", False),
+                              shared_colour_scale=None if shared is None else float(shared),
+                              noise_own=float(values.get("noise_own", 1.0)),
+                              noise_shared=float(values.get("noise_shared", 1.0)))
+    if not isinstance(calibration.data_association, bool):
+        raise TypeError(f"data_association must be true or false, got {calibration.data_association!r}")
     return calibration
 
 

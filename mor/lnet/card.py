@@ -151,6 +151,26 @@ def precision_table(precisions: dict[str, dict[str, Any]]) -> list[str]:
     return rows
 
 
+def criterion_table(criteria: dict[str, dict[str, Any]], scored: dict[str, dict[str, Any]], chosen: str
+                    ) -> list[str]:
+    """One row per calibration criterion: its multipliers (``calibration.json``'s ``criteria``) and the test
+    split's coverage and NLL under them (``metrics.json``'s ``calibration_criteria``); ``chosen`` is marked."""
+    def levels(coverage: dict[str, float]) -> str:
+        return " / ".join(f"{coverage[f'{k}sigma']:.3f}" for k in (1, 2, 3))
+
+    rows = ["| criterion | agent σ × | objects σ × (own / shared colour) | κ × | objects seen earlier, 1σ / 2σ / 3σ | "
+            "agent, 1σ / 2σ / 3σ | heading, 1σ / 2σ / 3σ | object NLL | heading NLL |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for name, fitted in criteria.items():
+        r = scored[name]
+        rows.append(f"| {name}{' (used)' if name == chosen else ''} | {fitted['agent_scale']:.3f} | "
+                    f"{fitted['object_scale']:.3f} / {_number(fitted.get('shared_colour_scale'), 3)} | "
+                    f"{fitted['kappa_scale']:.3f} | {levels(r['coverage_objects_seen'])} | "
+                    f"{levels(r['coverage_agent'])} | {levels(r['coverage_heading'])} | {r['nll_objects']:.3f} | "
+                    f"{r['nll_heading']:.3f} |")
+    return rows
+
+
 def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibration: dict[str, Any],
                       train_summary: dict[str, Any], figures: dict[str, str],
                       ablation: dict[str, Any] | None = None) -> str:
@@ -243,6 +263,13 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
                   "the measurement noise and the scales for each, and keeps the profile's `lnet.data_association`.",
                   "",
                   *tracking_rule_table(calibration["tracking_rules"]), ""]
+    if metrics.get("calibration_criteria") and calibration.get("criteria"):
+        lines += ["## Calibration criterion (test split)", "",
+                  "The multipliers fitted on validation by the NLL (its optimum) and by the coverage (the 1σ / 2σ / "
+                  "3σ coverage closest to nominal at its worst level), and the test split under each; "
+                  "`lnet.calibration.criterion` chooses which the L-Net uses.", "",
+                  *criterion_table(calibration["criteria"], metrics["calibration_criteria"],
+                                   calibration.get("criterion", "nll")), ""]
     if metrics.get("encoder_precision"):
         lines += ["## Encoder precision (test split, after calibration)", "",
                   "The same weights and calibration with the image encoder in float32 (as trained) and in bfloat16 "

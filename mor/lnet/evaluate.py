@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
@@ -262,24 +263,68 @@ def _scale(d2: np.ndarray) -> float | None:
     return float(np.sqrt(d2.mean() / 2.0)) if d2.size else None
 
 
-def fit_calibration(predictions: Predictions) -> Calibration:
-    """Scales that minimize the NLL on ``predictions``: for a 2-D Gaussian scaled by s, the optimum is
-    s^2 = mean(d^2) / 2, per group of objects (confusable: sharing their colour with another and not held; the
-    others); the heading's kappa multiplier is found numerically. The tracking settings (rule, measurement noise) are left at their defaults:
-    the caller records the ones the predictions were tracked with."""
-    p = predictions
-    agent_d2 = _d2(p.agent_pose[:, :2], p.agent_mean, p.agent_tril)
-    object_d2 = _d2(p.object_truth, p.object_mean, p.object_tril)
-    own, shared = _scale(object_d2[p.present & ~p.confusable]), _scale(object_d2[p.present & p.confusable])
-    error = torch.as_tensor(wrap_angle(p.agent_pose[:, 2] - p.heading))
-    kappa = torch.as_tensor(p.kappa, dtype=torch.float64)
+#: The multipliers ``criterion="coverage"`` chooses from: 1/16 to 16 in steps of about 2.3%.
+COVERAGE_GRID = np.exp(np.linspace(np.log(1 / 16), np.log(16), 241))
+
+
+def _closest_coverage(coverage: Callable[[float], np.ndarray], nominal: np.ndarray) -> float:
+    """The multiplier of ``COVERAGE_GRID`` whose 1/2/3-sigma coverage (``coverage(m)``, (3,)) deviates least from
+    ``nominal`` (3,) at its worst level (the smallest such multiplier where several tie)."""
+    worst = [float(np.max(np.abs(coverage(m) - nominal))) for m in COVERAGE_GRID]
+    return float(COVERAGE_GRID[int(np.argmin(worst))])
+
+
+def _coverage_scale(d2: np.ndarray) -> float | None:
+    """The multiplier s of a 2-D Gaussian's standard deviations whose 1/2/3-sigma coverage (d^2 / s^2 <= k^2) is
+    closest to nominal (None: no rows)."""
+    if not d2.size:
+        return None
+    ordered, levels = np.sort(d2), np.array([k * k for k in SIGMAS], np.float64)
+    nominal = np.array([NOMINAL_2D[k] for k in SIGMAS])
+    return _closest_coverage(lambda s: np.searchsorted(ordered, levels * s * s, side="right") / ordered.size,
+                             nominal)
+
+
+def _nll_kappa_scale(error: np.ndarray, kappa: np.ndarray) -> float:
+    """The multiplier of the von Mises concentrations ``kappa`` that minimizes the heading NLL of ``error`` (rad)."""
+    error_t, kappa_t = torch.as_tensor(error), torch.as_tensor(kappa, dtype=torch.float64)
 
     def heading_nll(log_scale: float) -> float:
-        scaled = kappa * float(np.exp(log_scale))
-        return float((-scaled * torch.cos(error) + log_i0(scaled)).mean())
+        scaled = kappa_t * float(np.exp(log_scale))
+        return float((-scaled * torch.cos(error_t) + log_i0(scaled)).mean())
 
-    log_scale = optimize.minimize_scalar(heading_nll, bounds=(-8.0, 8.0), method="bounded").x
-    return Calibration(_scale(agent_d2) or 1.0, own if own is not None else (shared or 1.0), float(np.exp(log_scale)),
+    return float(np.exp(optimize.minimize_scalar(heading_nll, bounds=(-8.0, 8.0), method="bounded").x))
+
+
+def _coverage_kappa_scale(error: np.ndarray, kappa: np.ndarray) -> float:
+    """The multiplier of the von Mises concentrations ``kappa`` whose 1/2/3-sigma-equivalent coverage of
+    ``error`` (rad) is closest to nominal."""
+    nominal = np.array([NOMINAL_1D[k] for k in SIGMAS])
+    return _closest_coverage(
+        lambda m: (heading_central_mass(error, kappa * m)[:, None] <= nominal).mean(0), nominal)
+
+
+#: How ``fit_calibration`` chooses each multiplier: the NLL's optimum, or the 1/2/3-sigma coverage closest to
+#: nominal (the largest deviation of the three smallest).
+CRITERIA = ("nll", "coverage")
+
+
+def fit_calibration(predictions: Predictions, criterion: str = "nll") -> Calibration:
+    """Multipliers of the stated uncertainty fitted on ``predictions``, per group of objects (confusable: sharing
+    their colour with another and not held; the others), for the agent and for the heading's kappa, by
+    ``criterion``: ``nll`` minimizes the NLL (for a 2-D Gaussian scaled by s the optimum is s^2 = mean(d^2) / 2;
+    kappa's multiplier is found numerically); ``coverage`` brings the 1/2/3-sigma coverage closest to nominal
+    (``COVERAGE_GRID``). The tracking settings (rule, measurement noise) are left at their defaults: the caller
+    records the ones the predictions were tracked with."""
+    if criterion not in CRITERIA:
+        raise ValueError(f"calibration criterion: expected one of {CRITERIA}, got {criterion!r}")
+    p = predictions
+    scale, kappa_scale = (_scale, _nll_kappa_scale) if criterion == "nll" else (_coverage_scale, _coverage_kappa_scale)
+    agent_d2 = _d2(p.agent_pose[:, :2], p.agent_mean, p.agent_tril)
+    object_d2 = _d2(p.object_truth, p.object_mean, p.object_tril)
+    own, shared = scale(object_d2[p.present & ~p.confusable]), scale(object_d2[p.present & p.confusable])
+    heading = kappa_scale(wrap_angle(p.agent_pose[:, 2] - p.heading), np.asarray(p.kappa, np.float64))
+    return Calibration(scale(agent_d2) or 1.0, own if own is not None else (shared or 1.0), heading,
                        shared_colour_scale=shared if own is not None else None)
 
 
@@ -319,18 +364,24 @@ def fit_measurement_noise(model: LNet, episodes: list[tuple[PoseEstimate, dict[s
     return best, {f"{own:g} x {shared:g}": value for (own, shared), value in tried.items()}
 
 
-def calibrate(model: LNet, episodes: list[tuple[PoseEstimate, dict[str, torch.Tensor]]]
+def calibrate(model: LNet, episodes: list[tuple[PoseEstimate, dict[str, torch.Tensor]]], criterion: str = "nll"
               ) -> tuple[Predictions, Calibration, dict[str, float]]:
     """Calibrate ``model`` (with its current tracking rule) on validation episodes (``frame_estimates``): the
-    filter's measurement noise (``fit_measurement_noise``), then the scales (``fit_calibration``). Returns the
-    uncalibrated predictions with the chosen noise, the calibration (recording the rule and the noise) and the
-    noise search's tries."""
+    filter's measurement noise (``fit_measurement_noise``), then the scales (``fit_calibration`` by
+    ``criterion``). Returns the uncalibrated predictions with the chosen noise, the calibration (recording the rule
+    and the noise) and the noise search's tries."""
     noise, tried = fit_measurement_noise(model, episodes)
     predictions = track_episodes(model, episodes)
+    return predictions, tracked_calibration(model, predictions, criterion), tried
+
+
+def tracked_calibration(model: LNet, predictions: Predictions, criterion: str) -> Calibration:
+    """``fit_calibration`` of ``predictions`` by ``criterion``, recording the tracking rule and measurement noise
+    ``model`` tracked them with."""
     data_association = model.config.tracker == "filter" and model.filter.data_association
-    calibration = replace(fit_calibration(predictions), data_association=data_association, noise_own=noise[0],
-                          noise_shared=noise[1])
-    return predictions, calibration, tried
+    noise = model.filter.measurement_noise if model.config.tracker == "filter" else (1.0, 1.0)
+    return replace(fit_calibration(predictions, criterion), data_association=data_association, noise_own=noise[0],
+                   noise_shared=noise[1])
 
 
 # ---- metrics ----------------------------------------------------------------------------------------------------
@@ -465,4 +516,5 @@ def headline(scored: dict[str, Any]) -> dict[str, Any]:
     return {"objects_seen_median_m": errors["seen"]["median"], "objects_visible_median_m": errors["visible"]["median"],
             "agent_median_m": scored["agent_position_error_m"]["median"],
             "heading_median_deg": scored["heading_error_deg"]["median"], "nll_objects": scored["nll"]["objects"],
-            "coverage_objects_seen": scored["coverage"]["objects_seen"]}
+            "nll_heading": scored["nll"]["heading"], "coverage_objects_seen": scored["coverage"]["objects_seen"],
+            "coverage_agent": scored["coverage"]["agent_position"], "coverage_heading": scored["coverage"]["heading"]}

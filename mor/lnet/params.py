@@ -60,6 +60,10 @@ class TrainParams(BaseModel):
     num_workers: int = Field(1, ge=0)
     beta_nll: float = Field(0.0, ge=0.0, le=1.0, description="beta of the beta-NLL (Seitzer et al. 2022) on the "
                             "PoseNet's object terms: each NLL weighted by the stop-gradient variance^beta; 0: NLL")
+    encoder_precision: Literal["float32", "bfloat16"] = Field(
+        "float32", description="the image encoder's arithmetic while training (torch.autocast around the encoder "
+        "only; weights, optimizer, heads and tracker stay float32); mor ablate-lnet --study training_precision "
+        "compares the two at an equal budget")
     seed: int = 0
 
 
@@ -69,6 +73,9 @@ class CalibrationParams(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     max_episodes: int = Field(200, ge=1, description="validation episodes used to fit the scales")
+    criterion: Literal["nll", "coverage"] = Field(
+        "nll", description="how each uncertainty multiplier is chosen: the NLL's optimum, or the 1/2/3-sigma "
+        "coverage closest to nominal; calibrate-lnet fits and reports both, and keeps this one")
 
 
 class LNetParams(BaseModel):
@@ -114,4 +121,7 @@ ABLATIONS: dict[str, dict[str, dict[str, object]]] = {
         "filter_visibility": {"tracker": "filter", "visibility": True},
         "filter_visibility_beta": {"tracker": "filter", "visibility": True, "beta_nll": 0.5},
     },
+    # Issue 10's training budget: the same model trained with its encoder in float32 or in bfloat16 (TrainParams).
+    "training_precision": {"float32": {"encoder_precision": "float32"},
+                           "bfloat16": {"encoder_precision": "bfloat16"}},
 }

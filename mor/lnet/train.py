@@ -84,6 +84,7 @@ def train(config: LNetConfig, params: TrainParams, train_root: Path, validation_
 
     # Model and optimizer, resumed from the last checkpoint when there is one.
     model = LNet(config).to(device)
+    model.use_encoder_precision(params.encoder_precision)  # training arithmetic; inference chooses its own
     optimizer = torch.optim.AdamW(model.parameters(), lr=params.learning_rate, weight_decay=params.weight_decay)
     step, pretrained, best, stale, seconds_before = 0, 0, float("inf"), 0, 0.0
     checkpoint_path = out_dir / CHECKPOINT
@@ -167,6 +168,6 @@ def train(config: LNetConfig, params: TrainParams, train_root: Path, validation_
                "best_validation_loss": best, "stopped_early": stopped_early,
                "train_windows": len(train_set), "device": str(device), "dataset_version": dataset_version,
                "image_size": train_set.image_size, "seconds": time.perf_counter() - start,
-               "torch_threads": torch.get_num_threads()}
+               "torch_threads": torch.get_num_threads(), "encoder_precision": params.encoder_precision}
     (out_dir / "train_summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary

@@ -136,10 +136,11 @@ def _predictions(n: int, true_scale: float, stated_scale: float) -> Predictions:
         episode=np.zeros(n, int), frame=np.arange(n), confusable=np.zeros((n, 5), bool))
 
 
-def test_calibration_repairs_overconfidence() -> None:
+@pytest.mark.parametrize("criterion", ["nll", "coverage"])
+def test_calibration_repairs_overconfidence(criterion: str) -> None:
     predictions = _predictions(4000, true_scale=0.2, stated_scale=0.1)  # stated sigma half the true one
     before = metrics(predictions)["coverage"]["agent_position"]["2sigma"]
-    calibration = fit_calibration(predictions)
+    calibration = fit_calibration(predictions, criterion)  # Gaussian errors: both criteria find the same scales
     assert calibration.agent_scale == pytest.approx(2.0, rel=0.05)
     assert calibration.object_scale == pytest.approx(2.0, rel=0.05)
     assert calibration.kappa_scale == pytest.approx(0.25, rel=0.1)  # kappa 400 stated, 100 true
@@ -149,6 +150,25 @@ def test_calibration_repairs_overconfidence() -> None:
         assert after["agent_position"][f"{k}sigma"] == pytest.approx(NOMINAL_2D[k], abs=0.03)
         assert after["objects_seen"][f"{k}sigma"] == pytest.approx(NOMINAL_2D[k], abs=0.03)
     assert Calibration().apply(predictions, predictions.confusable).agent_tril is not None
+
+
+def test_the_coverage_criterion_trades_the_nll_for_coverage_on_heavy_tailed_errors() -> None:
+    predictions = _predictions(4000, true_scale=0.1, stated_scale=0.1)
+    rng = np.random.default_rng(1)
+    tail = rng.random((4000, 5)) < 0.15  # a narrow core and a tail ten times wider
+    predictions = replace(predictions, object_mean=predictions.object_mean + np.where(
+        tail[..., None], rng.normal(scale=1.0, size=(4000, 5, 2)), 0.0))
+
+    def worst(calibration: Calibration) -> tuple[float, float]:
+        scored = metrics(calibration.apply(predictions, predictions.confusable))
+        coverage = scored["coverage"]["objects_seen"]
+        return max(abs(coverage[f"{k}sigma"] - NOMINAL_2D[k]) for k in (1, 2, 3)), scored["nll"]["objects"]
+
+    (nll_worst, nll_nll), (coverage_worst, coverage_nll) = (worst(fit_calibration(predictions, c))
+                                                            for c in ("nll", "coverage"))
+    assert coverage_worst < nll_worst and nll_nll < coverage_nll  # each wins on what it optimizes
+    with pytest.raises(ValueError, match="calibration criterion: expected one of"):
+        fit_calibration(predictions, "quantile")
 
 
 def test_objects_sharing_their_colour_get_their_own_scale() -> None:

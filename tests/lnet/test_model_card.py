@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from mor.lnet.card import precision_table, tracking_rule_table
+from mor.lnet.card import criterion_table, precision_table, tracking_rule_table
 
 
 def test_the_tracking_rule_table_has_one_row_per_rule_from_its_own_calibration() -> None:
@@ -28,3 +28,15 @@ def test_the_precision_table_has_one_row_per_encoder_precision() -> None:
     assert len(rows) == 4 and rows[0].count("|") == rows[1].count("|") == rows[3].count("|")
     assert rows[2] == "| float32 | 0.180 | 0.220 | 0.120 | 1.000 | 0.570 / 0.900 / 0.980 | 1.38 |"
     assert rows[3].startswith("| bfloat16 | 0.190 |")
+
+
+def test_the_criterion_table_shows_each_criterion_s_multipliers_and_test_coverage() -> None:
+    levels = {"1sigma": 0.4, "2sigma": 0.86, "3sigma": 0.99}
+    scored = {"coverage_objects_seen": levels, "coverage_agent": levels, "coverage_heading": levels,
+              "nll_objects": 1.0, "nll_heading": -1.5}
+    fitted = {"agent_scale": 0.96, "object_scale": 0.9, "shared_colour_scale": 2.26, "kappa_scale": 1.918}
+    rows = criterion_table({"nll": fitted, "coverage": {**fitted, "kappa_scale": 2.2}},
+                           {"nll": scored, "coverage": scored}, "nll")
+    assert len(rows) == 4 and rows[0].count("|") == rows[1].count("|") == rows[2].count("|") == rows[3].count("|")
+    assert rows[2].startswith("| nll (used) | 0.960 | 0.900 / 2.260 | 1.918 | 0.400 / 0.860 / 0.990 |")
+    assert rows[3].startswith("| coverage | 0.960 |") and "| 2.200 |" in rows[3] and rows[3].endswith("| -1.500 |")

@@ -50,6 +50,23 @@ def test_pretraining_runs_first_resumes_and_leaves_the_window_steps_to_follow(ti
     assert rows == [("pretrain", -1), ("pretrain", 0), ("train", 1), ("train", 2)]
 
 
+def test_a_bfloat16_encoder_trains_float32_weights_to_another_result(tiny_dataset: tuple, tmp_path: Path) -> None:
+    manifest, root, _ = tiny_dataset
+    version = manifest_version(read_manifest(manifest))
+    params = PARAMS.model_copy(update={"max_steps": 2})
+    trained = {}
+    for precision in ("float32", "bfloat16"):
+        summary = train(CONFIG, params.model_copy(update={"encoder_precision": precision}), root / "train",
+                        root / "validation", tmp_path / precision, version, progress=False)
+        assert summary["encoder_precision"] == precision
+        trained[precision] = load_model(tmp_path / precision / BEST, signature(CONFIG, version, 16),
+                                        torch.device("cpu"))
+    weights = {name: model.state_dict()["posenet.encoder.features.0.weight"] for name, model in trained.items()}
+    assert all(w.dtype == torch.float32 for w in weights.values())  # master weights stay float32
+    assert not torch.equal(weights["float32"], weights["bfloat16"])  # the same seed, other arithmetic
+    assert not trained["bfloat16"].posenet.encoder_bfloat16  # inference chooses its own precision on load
+
+
 def test_foreign_checkpoints_are_refused_with_both_sides_named(tiny_dataset: tuple, tmp_path: Path) -> None:
     manifest, root, _ = tiny_dataset
     version = manifest_version(read_manifest(manifest))
