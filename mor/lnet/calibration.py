@@ -36,13 +36,13 @@ class Calibration:
     noise_own: float = 1.0
     noise_shared: float = 1.0
 
-    def apply(self, estimates: _T, confusable: Any) -> _T:
+    def apply(self, estimates: _T, confusable_mask: Any) -> _T:
         """A copy of ``estimates`` (any dataclass with ``agent_tril``, ``object_tril`` (..., K, 2, 2) and
-        ``kappa``) with the Cholesky factors and the concentration scaled; confusable (..., K) bool (numpy or
-        torch, as the estimates): the object shares its colour with another and is not held
-        (``confusable`` below), so ``shared_colour_scale`` is its scale."""
+        ``kappa``) with the Cholesky factors and the concentration scaled; confusable_mask (..., K) bool (numpy
+        or torch, as the estimates): the object shares its colour with another and is not held (``confusable``
+        below), so ``shared_colour_scale`` is its scale."""
         common = self.object_scale if self.shared_colour_scale is None else self.shared_colour_scale
-        object_scale = self.object_scale + (common - self.object_scale) * confusable
+        object_scale = self.object_scale + (common - self.object_scale) * confusable_mask
         return replace(estimates, agent_tril=estimates.agent_tril * self.agent_scale,  # type: ignore[type-var]
                        object_tril=estimates.object_tril * object_scale[..., None, None],  # type: ignore[attr-defined]
                        kappa=estimates.kappa * self.kappa_scale)  # type: ignore[attr-defined]

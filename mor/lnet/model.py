@@ -146,7 +146,7 @@ class PoseNet(nn.Module):
             self.attention = ObjectAttention(self.encoder.channels, config.class_embedding_dim)
             object_inputs += self.encoder.channels
         self.object_head = _mlp(object_inputs, config.mlp_hidden, 6 if config.visibility else 5)
-        self.encoder_bfloat16 = False  # an inference setting: LNet.use_encoder_precision
+        self.encoder_bfloat16 = False  # the encoder's arithmetic, not a weight: LNet.use_encoder_precision
 
     def forward(self, images: torch.Tensor, classes: torch.Tensor) -> PoseEstimate:
         """images (N, 3, H, W), classes (N, K) -> PoseEstimate with leading dim N (objects in the ego frame)."""
@@ -208,8 +208,9 @@ class LNet(nn.Module):
             raise ValueError("measurement-noise multipliers need the filter tracker; this model's tracker is the LSTM")
 
     def use_encoder_precision(self, precision: str) -> None:
-        """The image encoder's arithmetic: ``float32`` (as trained) or ``bfloat16`` (``torch.autocast`` around the
-        encoder only; the heads and the tracker stay float32). Anything else is a ValueError."""
+        """The image encoder's arithmetic from now on, in training or inference: ``float32`` or ``bfloat16``
+        (``torch.autocast`` around the encoder only; weights, heads and tracker stay float32). It is not saved with
+        the weights: whoever loads them chooses. Anything else is a ValueError."""
         if precision not in ("float32", "bfloat16"):
             raise ValueError(f"encoder precision: expected float32 or bfloat16, got {precision!r}")
         self.posenet.encoder_bfloat16 = precision == "bfloat16"

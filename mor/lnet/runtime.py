@@ -175,7 +175,7 @@ def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str
     (what the calibration stage itself needs). compiled: the streaming step through ``torch.compile``.
     data_association: the tracking rule (``mor.lnet.filter``); None: the one the calibration was fitted for (none
     when uncalibrated); given with a calibration fitted for the other rule, one clear error. encoder_precision:
-    float32 (as trained) or bfloat16 (``LNet.use_encoder_precision``).
+    float32 or bfloat16 (``LNet.use_encoder_precision``), whichever the weights were trained with.
     """
     path = Path(path)
     saved = load_checkpoint(path, expected or {}, device)
