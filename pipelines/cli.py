@@ -333,9 +333,8 @@ def eval_lnet_command(profile: ProfileOption = None, params: ParamsOption = DEFA
 
 @app.command("ablate-lnet")
 def ablate_lnet_command(
-    study: Annotated[str, typer.Option(help="Which variants: actions (previous action as LSTM input or not), "
-                                            "object_head (global MLP or class attention) or tracker (lstm or "
-                                            "filter, with and without the visibility loss).")] = "actions",
+    study: Annotated[str, typer.Option(help="Which variants (mor.lnet.params.ABLATIONS): actions, object_head, "
+                                            "tracker, training_precision or bfloat16_training.")] = "actions",
     steps: Annotated[int, typer.Option(min=1, help="Window training steps per variant.")] = 300,
     pretrain_steps: Annotated[int | None, typer.Option(min=0, help="PoseNet pretraining steps per variant (default: "
                                                                     "the profile's).")] = None,

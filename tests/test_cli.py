@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -102,6 +103,13 @@ def test_help_lists_the_commands(cli) -> None:
     result = cli("sim", "--help")
     for command in ("oracle", "render", "video", "demo"):
         assert command in result.stdout
+
+
+def test_the_ablation_help_names_every_study(cli) -> None:
+    from mor.lnet.params import ABLATIONS  # noqa: PLC0415
+
+    words = set(re.findall(r"\w+", cli("ablate-lnet", "--help").stdout))  # rich wraps and boxes the text
+    assert set(ABLATIONS) <= words
 
 
 # ---- the active profile: `profile:` in params.yaml, unless --profile says otherwise ------------------------------
