@@ -334,7 +334,7 @@ def eval_lnet_command(profile: ProfileOption = None, params: ParamsOption = DEFA
 @app.command("ablate-lnet")
 def ablate_lnet_command(
     study: Annotated[str, typer.Option(help="Which variants (mor.lnet.params.ABLATIONS): actions, object_head, "
-                                            "tracker, training_precision or bfloat16_training.")] = "actions",
+                                            "tracker or training_precision.")] = "actions",
     steps: Annotated[int, typer.Option(min=1, help="Window training steps per variant.")] = 300,
     pretrain_steps: Annotated[int | None, typer.Option(min=0, help="PoseNet pretraining steps per variant (default: "
                                                                     "the profile's).")] = None,

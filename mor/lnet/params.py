@@ -124,6 +124,4 @@ ABLATIONS: dict[str, dict[str, dict[str, object]]] = {
     # Issue 10's training budget: the same model trained with its encoder in float32 or in bfloat16 (TrainParams).
     "training_precision": {"float32": {"encoder_precision": "float32"},
                            "bfloat16": {"encoder_precision": "bfloat16"}},
-    # The profile's whole budget in bfloat16 alone (--steps 2000), beside the committed float32 model (cards/lnet).
-    "bfloat16_training": {"bfloat16": {"encoder_precision": "bfloat16"}},
 }
