@@ -20,6 +20,7 @@ arrays and written with ``mor.sim.views.write_png`` / ``write_video`` (a partial
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -387,7 +388,7 @@ def since_seen_figure(curves: Mapping[str, Mapping[str, Sequence[Any]]], title: 
     ax.set_xticks([start + 1 for start in starts], [str(start) for start in starts])
     ax.set_xlabel("frames since the object was last visible or held (bin start)")
     ax.set_ylabel("median position error (m)")
-    ax.set_title(title, fontsize=10)
+    ax.set_title(textwrap.fill(title, 72), fontsize=10)  # long study titles wrap instead of being cut
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     return figure
