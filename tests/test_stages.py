@@ -153,8 +153,10 @@ def test_validate_without_a_manifest_is_one_clear_line(workspace: Path) -> None:
 def test_an_unknown_ablation_study_is_one_clear_line(workspace: Path) -> None:
     result = CliRunner().invoke(app, ["ablate-lnet", "--study", "colour"])
     assert result.exit_code == 2
+    from mor.lnet.params import ABLATIONS  # noqa: PLC0415
+
     assert result.output.strip().splitlines() == [
-        "error: --study: unknown study 'colour'; choose one of actions, object_head, tracker"]
+        f"error: --study: unknown study 'colour'; choose one of {', '.join(ABLATIONS)}"]
 
 
 def test_baseline_stages_train_evaluate_and_fill_table_1(workspace: Path) -> None:
