@@ -47,7 +47,7 @@ def run(profile: Profile) -> dict[str, Any]:
                    **asdict(fitted), "validation_after": headline(after[rule])}
                    for rule, (_, fitted, _) in fits.items()},
                "criteria": {name: {**asdict(fitted), "validation_after": headline(
-                   metrics(fitted.apply(predictions, predictions.confusable)))}
+                   after[chosen] if name == criterion else metrics(fitted.apply(predictions, predictions.confusable)))}
                    for name, fitted in by_criterion.items()},
                "seconds": round(time.perf_counter() - started, 1)}
     write_json(paths.LNET_CALIBRATION, payload)

@@ -49,9 +49,11 @@ def run(profile: Profile) -> dict[str, Any]:
     runner.model.use_encoder_precision(chosen)
     result["encoder_precision"] = {chosen: headline(result["after_calibration"]),
                                    other: headline(metrics(calibration.apply(reduced, reduced.confusable)))}
-    criteria = read_json(paths.LNET_CALIBRATION).get("criteria", {})  # each criterion's scales, on the test split
-    result["calibration_criteria"] = {name: headline(metrics(calibration_from_values(values).apply(
-        predictions, predictions.confusable))) for name, values in criteria.items()}
+    criteria = {name: calibration_from_values(values)  # each criterion's scales, on the test split
+                for name, values in read_json(paths.LNET_CALIBRATION).get("criteria", {}).items()}
+    result["calibration_criteria"] = {name: headline(result["after_calibration"] if fitted == calibration else
+                                                     metrics(fitted.apply(predictions, predictions.confusable)))
+                                      for name, fitted in criteria.items()}
     # Real runs of the test split (its episodes are numbered in manifest order), reported on their own.
     test_sources = [row["source"] for row in manifest.to_pylist() if row["split"] == "test"]
     real = np.isin(predictions.episode, [i for i, source in enumerate(test_sources) if source == "real"])

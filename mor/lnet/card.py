@@ -125,11 +125,15 @@ _HEADLINE_COLUMNS = ("objects seen earlier, median (m) | in view, median (m) | a
                      "objects seen earlier, 1σ / 2σ / 3σ")
 
 
+def _levels(coverage: dict[str, float]) -> str:
+    """A coverage block's 1σ / 2σ / 3σ as one cell."""
+    return " / ".join(f"{coverage[f'{k}sigma']:.3f}" for k in (1, 2, 3))
+
+
 def _headline_cells(r: dict[str, Any]) -> str:
     """The cells of ``_HEADLINE_COLUMNS`` from a ``mor.lnet.evaluate.headline``."""
-    coverage = " / ".join(f"{r['coverage_objects_seen'][f'{k}sigma']:.3f}" for k in (1, 2, 3))
     return (f"{r['objects_seen_median_m']:.3f} | {r['objects_visible_median_m']:.3f} | {r['agent_median_m']:.3f} | "
-            f"{r['nll_objects']:.3f} | {coverage}")
+            f"{r['nll_objects']:.3f} | {_levels(r['coverage_objects_seen'])}")
 
 
 def tracking_rule_table(rules: dict[str, dict[str, Any]]) -> list[str]:
@@ -155,9 +159,6 @@ def criterion_table(criteria: dict[str, dict[str, Any]], scored: dict[str, dict[
                     ) -> list[str]:
     """One row per calibration criterion: its multipliers (``calibration.json``'s ``criteria``) and the test
     split's coverage and NLL under them (``metrics.json``'s ``calibration_criteria``); ``chosen`` is marked."""
-    def levels(coverage: dict[str, float]) -> str:
-        return " / ".join(f"{coverage[f'{k}sigma']:.3f}" for k in (1, 2, 3))
-
     rows = ["| criterion | agent σ × | objects σ × (own / shared colour) | κ × | objects seen earlier, 1σ / 2σ / 3σ | "
             "agent, 1σ / 2σ / 3σ | heading, 1σ / 2σ / 3σ | object NLL | heading NLL |",
             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
@@ -165,8 +166,8 @@ def criterion_table(criteria: dict[str, dict[str, Any]], scored: dict[str, dict[
         r = scored[name]
         rows.append(f"| {name}{' (used)' if name == chosen else ''} | {fitted['agent_scale']:.3f} | "
                     f"{fitted['object_scale']:.3f} / {_number(fitted.get('shared_colour_scale'), 3)} | "
-                    f"{fitted['kappa_scale']:.3f} | {levels(r['coverage_objects_seen'])} | "
-                    f"{levels(r['coverage_agent'])} | {levels(r['coverage_heading'])} | {r['nll_objects']:.3f} | "
+                    f"{fitted['kappa_scale']:.3f} | {_levels(r['coverage_objects_seen'])} | "
+                    f"{_levels(r['coverage_agent'])} | {_levels(r['coverage_heading'])} | {r['nll_objects']:.3f} | "
                     f"{r['nll_heading']:.3f} |")
     return rows
 
