@@ -14,7 +14,17 @@ from mor.data.manifest import manifest_version, read_manifest
 from mor.data.sequences import SequenceWindows
 from mor.lnet.calibration import calibration_from_values
 from mor.lnet.card import read_json, render_model_card, write_model_card
-from mor.lnet.evaluate import Predictions, headline, metrics, predict, predict_live, story
+from mor.lnet.evaluate import (
+    Predictions,
+    calibrated_metrics,
+    headline,
+    metrics,
+    object_arena_shares,
+    predict,
+    predict_live,
+    story,
+)
+from mor.lnet.lost import ArenaShares
 from mor.lnet.figures import (
     write_estimate_gif,
     write_estimate_strip,
@@ -37,36 +47,42 @@ def run(profile: Profile) -> dict[str, Any]:
     calibration = runner.calibration
     manifest = read_manifest(paths.MANIFEST)
     predictions = predict(runner.model, paths.LEROBOT / "test", profile.lnet.eval_episodes, runner.device)
+    arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
+    shares = object_arena_shares(predictions, arena)  # the objects' stated belief (mor.lnet.lost)
 
-    def scored(p: Predictions) -> dict[str, Any]:
-        return {"before_calibration": metrics(p), "after_calibration": metrics(calibration.apply(p, p.confusable))}
+    def scored(p: Predictions, p_shares: ArenaShares) -> dict[str, Any]:
+        return {"before_calibration": metrics(p), "after_calibration": calibrated_metrics(p, calibration, p_shares)}
 
-    result = {"dataset_version": manifest_version(manifest), "calibration": asdict(calibration), **scored(predictions)}
+    result = {"dataset_version": manifest_version(manifest), "calibration": asdict(calibration),
+              **scored(predictions, shares)}
     chosen = runner.encoder_precision  # the other precision on the same frames, for lnet.encoder_precision's choice
     other = "bfloat16" if chosen == "float32" else "float32"
     runner.model.use_encoder_precision(other)
     reduced = predict(runner.model, paths.LEROBOT / "test", profile.lnet.eval_episodes, runner.device)
     runner.model.use_encoder_precision(chosen)
     result["encoder_precision"] = {chosen: headline(result["after_calibration"]),
-                                   other: headline(metrics(calibration.apply(reduced, reduced.confusable)))}
+                                   other: headline(calibrated_metrics(reduced, calibration,
+                                                                      object_arena_shares(reduced, arena)))}
     criteria = {name: calibration_from_values(values)  # each criterion's scales, on the test split
                 for name, values in read_json(paths.LNET_CALIBRATION).get("criteria", {}).items()}
     result["calibration_criteria"] = {name: headline(result["after_calibration"] if fitted == calibration else
-                                                     metrics(fitted.apply(predictions, predictions.confusable)))
+                                                     calibrated_metrics(predictions, fitted, shares))
                                       for name, fitted in criteria.items()}
     # Real runs of the test split (its episodes are numbered in manifest order), reported on their own.
     test_sources = [row["source"] for row in manifest.to_pylist() if row["split"] == "test"]
     real = np.isin(predictions.episode, [i for i, source in enumerate(test_sources) if source == "real"])
-    result["real"] = scored(predictions.select(real)) if real.any() else None
+    result["real"] = scored(predictions.select(real), shares.select(real)) if real.any() else None
     if profile.lnet.oracle_episodes:  # the episodes the policies will produce: oracle-driven, tracked live
         live = predict_live(runner, profile.sim, "oracle", profile.lnet.oracle_episodes, ORACLE_SEED)
-        result["oracle"] = {"seed": ORACLE_SEED, **scored(live)}
+        result["oracle"] = {"seed": ORACLE_SEED, **scored(live, object_arena_shares(live, arena))}
     result["seconds"] = round(time.perf_counter() - started, 1)  # the metrics; the figures below are not counted
     write_json(card / "metrics.json", result)
 
     reliability = {f"{name} ({when})": result[key]["reliability"][name]
                    for key, when in (("before_calibration", "before"), ("after_calibration", "after"))
                    for name in ("agent_position", "objects_seen", "heading")}
+    if calibration.lost_own or calibration.lost_shared:  # the objects' stated belief differs from its Gaussian
+        reliability["objects_seen (after, stated)"] = result["after_calibration"]["stated"]["reliability_objects_seen"]
     write_reliability_diagram(card / "reliability.png", np.asarray(result["before_calibration"]["reliability"]
                               ["nominal"]), {k: np.asarray(v) for k, v in reliability.items()},
                               "L-Net reliability on the test split")
@@ -79,7 +95,6 @@ def run(profile: Profile) -> dict[str, Any]:
     estimate = {name: getattr(shown, name) for name in ("agent_mean", "agent_tril", "heading", "kappa",
                                                         "object_mean", "object_tril")}
     images = episode["images"].numpy()
-    arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
     write_estimate_strip(card / "estimates_strip.png", arena, truth, estimate, frames, images)
     write_estimate_gif(card / "estimates.gif", arena, truth, estimate, images, fps=5, every=2)
     curves = {"test": result["after_calibration"]["object_error_by_steps_since_seen"]}

@@ -71,11 +71,16 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     assert metrics["encoder_precision"]["float32"]["objects_seen_median_m"] == metrics["after_calibration"][
         "object_position_error_m"]["seen"]["median"]
     assert "## Encoder precision" in (card / "README.md").read_text()
-    # both calibration criteria fitted on validation and scored on test; the profile's (nll) is the one used
+    # both calibration criteria, with and without lost probabilities, fitted on validation and scored on test;
+    # the profile's (nll, no lost probabilities) is the one used
     calibration = json.loads((workspace / "datasets/lnet/calibration.json").read_text())
-    assert calibration["criterion"] == "nll" and set(calibration["criteria"]) == {"nll", "coverage"}
+    criteria = {"nll", "coverage", "nll+lost", "coverage+lost"}
+    assert calibration["criterion"] == "nll" and set(calibration["criteria"]) == criteria
     assert calibration["criteria"]["nll"]["object_scale"] == calibration["object_scale"]
-    assert set(metrics["calibration_criteria"]) == {"nll", "coverage"}
+    assert calibration["lost_own"] == 0.0 and calibration["criteria"]["nll+lost"]["lost_own"] > 0.0
+    assert set(metrics["calibration_criteria"]) == criteria
+    assert metrics["after_calibration"]["stated"]["coverage"]["objects_seen"] == metrics["after_calibration"][
+        "coverage"]["objects_seen"]  # without lost probabilities the stated belief is the Gaussian
     assert metrics["calibration_criteria"]["nll"]["coverage_heading"] == metrics["after_calibration"]["coverage"][
         "heading"]
     assert "| nll (used) |" in (card / "README.md").read_text()

@@ -25,6 +25,7 @@ _ERROR_ROWS = (("agent position (m)", ("agent_position_error_m",), 3),
                ("all objects (m)", ("object_position_error_m", "all"), 3))
 _COVERAGE_GROUPS = ("agent_position", "heading", "objects_visible", "objects_seen", "objects_seen_confusable",
                     "objects_unseen")
+_STATED_GROUPS = ("objects_seen", "objects_unseen")
 
 
 def _get(d: dict, path: tuple[str, ...]) -> Any:
@@ -88,6 +89,14 @@ def coverage_table(columns: dict[str, dict[str, Any]]) -> list[str]:
         for k in (1, 2, 3):
             rows.append(f"| coverage {group} {k}σ | " + " | ".join(
                 _number(_get(b, ("coverage", group, f"{k}sigma")), 3) for b in columns.values()) + " |")
+    if any("stated" in b for b in columns.values()):  # the objects' stated belief (mor.lnet.lost)
+        rows.append("| NLL objects, stated | " + " | ".join(
+            _number(_get(b, ("stated", "nll_objects")), 3) for b in columns.values()) + " |")
+        for group in _STATED_GROUPS:
+            for k in (1, 2, 3):
+                rows.append(f"| coverage {group}, stated {k}σ | " + " | ".join(
+                    _number(_get(b, ("stated", "coverage", group, f"{k}sigma")), 3) for b in columns.values())
+                    + " |")
     return rows
 
 
@@ -114,11 +123,22 @@ def _object_calibration(calibration: dict[str, Any]) -> str:
     scales = (f"objects σ × {calibration['object_scale']:.3f}" if shared is None else
               f"objects σ × {calibration['object_scale']:.3f} (of their own colour) and × {shared:.3f} (sharing "
               "their colour with another object of the episode)")
+    lost = _lost_cell(calibration)
+    if lost != "–":
+        scales += f"; lost with probability {lost} (own / shared colour: the object anywhere in the arena)"
     noise = (calibration.get("noise_own", 1.0), calibration.get("noise_shared", 1.0))
     if noise == (1.0, 1.0):
         return scales
     return (f"{scales}; the filter's object measurement noise × {noise[0]:g} (own colour) and × {noise[1]:g} "
             "(shared colour), chosen from powers of two by the validation error of the objects seen earlier")
+
+
+def _lost_cell(calibration: dict[str, Any]) -> str:
+    """A calibration's lost probabilities (own / shared colour) as one cell; "–" where none was fitted."""
+    own, shared = calibration.get("lost_own", 0.0), calibration.get("lost_shared")
+    if not own and not shared:
+        return "–"
+    return f"{own:.3f} / {_number(shared, 3)}"
 
 
 _HEADLINE_COLUMNS = ("objects seen earlier, median (m) | in view, median (m) | agent, median (m) | object NLL | "
@@ -159,16 +179,19 @@ def criterion_table(criteria: dict[str, dict[str, Any]], scored: dict[str, dict[
                     ) -> list[str]:
     """One row per calibration criterion: its multipliers (``calibration.json``'s ``criteria``) and the test
     split's coverage and NLL under them (``metrics.json``'s ``calibration_criteria``); ``chosen`` is marked."""
-    rows = ["| criterion | agent σ × | objects σ × (own / shared colour) | κ × | objects seen earlier, 1σ / 2σ / 3σ | "
-            "agent, 1σ / 2σ / 3σ | heading, 1σ / 2σ / 3σ | object NLL | heading NLL |",
-            "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    rows = ["| criterion | agent σ × | objects σ × (own / shared colour) | objects lost (own / shared colour) | κ × | "
+            "objects seen earlier, Gaussian 1σ / 2σ / 3σ | objects seen earlier, stated 1σ / 2σ / 3σ | "
+            "agent, 1σ / 2σ / 3σ | heading, 1σ / 2σ / 3σ | object NLL, Gaussian / stated | heading NLL |",
+            "| --- |" + " --- |" * 10]
     for name, fitted in criteria.items():
         r = scored[name]
+        stated = r.get("coverage_objects_seen_stated")
         rows.append(f"| {name}{' (used)' if name == chosen else ''} | {fitted['agent_scale']:.3f} | "
                     f"{fitted['object_scale']:.3f} / {_number(fitted.get('shared_colour_scale'), 3)} | "
-                    f"{fitted['kappa_scale']:.3f} | {_levels(r['coverage_objects_seen'])} | "
-                    f"{_levels(r['coverage_agent'])} | {_levels(r['coverage_heading'])} | {r['nll_objects']:.3f} | "
-                    f"{r['nll_heading']:.3f} |")
+                    f"{_lost_cell(fitted)} | {fitted['kappa_scale']:.3f} | {_levels(r['coverage_objects_seen'])} | "
+                    f"{_levels(stated) if stated else '–'} | {_levels(r['coverage_agent'])} | "
+                    f"{_levels(r['coverage_heading'])} | {r['nll_objects']:.3f} / "
+                    f"{_number(r.get('nll_objects_stated'), 3)} | {r['nll_heading']:.3f} |")
     return rows
 
 
@@ -243,6 +266,13 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
         f"{nominal['nominal_2d']['3sigma']:.3f}; heading {nominal['nominal_heading']['1sigma']:.3f} / "
         f"{nominal['nominal_heading']['2sigma']:.3f} / {nominal['nominal_heading']['3sigma']:.3f}.", "",
         *coverage_table(columns), "",
+    ]
+    if _lost_cell(calibration) != "–":
+        lines += [f"'Stated': the objects' stated belief after calibration, their Gaussian or, with probability "
+                  f"{_lost_cell(calibration)} (own / shared colour), anywhere in the arena; its kσ region is its "
+                  "highest-density region of the 2-D kσ mass (`mor/lnet/lost.py`; the streaming step returns the "
+                  "probability as `Estimates.object_lost`). The other object rows are its Gaussian alone.", ""]
+    lines += [
         f"![reliability]({figures['reliability']})", "",
     ]
     by_sightings = {"test": after} | ({"oracle-driven": oracle["after_calibration"]} if oracle else {})
@@ -267,8 +297,12 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
     if metrics.get("calibration_criteria") and calibration.get("criteria"):
         lines += ["## Calibration criterion (test split)", "",
                   "The multipliers fitted on validation by the NLL (its optimum) and by the coverage (the 1σ / 2σ / "
-                  "3σ coverage closest to nominal at its worst level), and the test split under each; "
-                  "`lnet.calibration.criterion` chooses which the L-Net uses.", "",
+                  "3σ coverage closest to nominal at its worst level), each with and without the objects' lost "
+                  "probabilities (`+lost`: the stated belief of an object is its Gaussian, or with that probability "
+                  "anywhere in the arena; its kσ region is its highest-density region of the 2-D kσ mass, "
+                  "`mor/lnet/lost.py`), and the test split under each; `lnet.calibration.criterion` and "
+                  "`lnet.calibration.lost_objects` choose which the L-Net uses. Without lost probabilities the "
+                  "stated belief is the Gaussian.", "",
                   *criterion_table(calibration["criteria"], metrics["calibration_criteria"],
                                    calibration.get("criterion", "nll")), ""]
     if metrics.get("encoder_precision"):

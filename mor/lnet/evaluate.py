@@ -25,8 +25,10 @@ from mor.data.sequences import SequenceWindows
 from mor.lnet.calibration import Calibration, confusable
 from mor.lnet.likelihoods import gaussian_nll, log_i0, mahalanobis_squared, von_mises_nll
 from mor.lnet.loss import previous_actions
+from mor.lnet.lost import ArenaShares, arena_shares, fit_nll, log_density, region_mass
 from mor.lnet.model import ESTIMATE_FIELDS, LNet, PoseEstimate
 from mor.lnet.runtime import LNetRunner
+from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
 from mor.sim.geometry import wrap_angle
 from mor.sim.rollout import episode_seed, make_policy
@@ -304,28 +306,72 @@ def _coverage_kappa_scale(error: np.ndarray, kappa: np.ndarray) -> float:
         lambda m: (heading_central_mass(error, kappa * m)[:, None] <= nominal).mean(0), nominal)
 
 
+#: The lost probabilities the coverage criterion chooses from (with a multiplier of ``COVERAGE_GRID``): 0 to 0.5.
+LOST_GRID = np.linspace(0.0, 0.5, 26)
+
+
+def _lost_fit(criterion: str, d2: np.ndarray, half_log_det: np.ndarray, share: np.ndarray, area: float
+              ) -> tuple[float, float] | None:
+    """(multiplier, lost probability) of a group of objects' Gaussians (rows (R,): squared Mahalanobis d2, log
+    sqrt(det cov), ``ArenaShares.share``) by ``criterion`` (``mor.lnet.lost``); None: no rows."""
+    if not d2.size:
+        return None
+    if criterion == "nll":
+        return fit_nll(d2, half_log_det, area)
+    nominal = np.array([NOMINAL_2D[k] for k in SIGMAS])
+    worst = np.empty((len(COVERAGE_GRID), len(LOST_GRID)))  # as _closest_coverage, over (multiplier, weight)
+    for i, multiplier in enumerate(COVERAGE_GRID):
+        core = region_mass(d2 / (multiplier * multiplier), 0.0, share)
+        mass = (1.0 - LOST_GRID)[:, None] * core + LOST_GRID[:, None] * share              # (W, R)
+        worst[i] = np.abs((mass[..., None] <= nominal).mean(1) - nominal).max(1)
+    best_multiplier, best_weight = np.unravel_index(int(np.argmin(worst)), worst.shape)
+    return float(COVERAGE_GRID[best_multiplier]), float(LOST_GRID[best_weight])
+
+
+def _half_log_det(tril: np.ndarray) -> np.ndarray:
+    """log sqrt(det cov) of lower Cholesky factors (..., 2, 2)."""
+    return np.log(np.abs(tril[..., 0, 0] * tril[..., 1, 1]))
+
+
 #: How ``fit_calibration`` chooses each multiplier: the NLL's optimum, or the 1/2/3-sigma coverage closest to
 #: nominal (the largest deviation of the three smallest).
 CRITERIA = ("nll", "coverage")
 
 
-def fit_calibration(predictions: Predictions, criterion: str = "nll") -> Calibration:
+def criterion_name(criterion: str, lost_objects: bool) -> str:
+    """How ``calibration.json`` names a criterion: ``nll``, ``coverage``, or either with ``+lost`` (lost
+    probabilities fitted too)."""
+    return criterion + ("+lost" if lost_objects else "")
+
+
+def fit_calibration(predictions: Predictions, criterion: str = "nll", shares: ArenaShares | None = None
+                    ) -> Calibration:
     """Multipliers of the stated uncertainty fitted on ``predictions``, per group of objects (confusable: sharing
     their colour with another and not held; the others), for the agent and for the heading's kappa, by
     ``criterion``: ``nll`` minimizes the NLL (for a 2-D Gaussian scaled by s the optimum is s^2 = mean(d^2) / 2;
     kappa's multiplier is found numerically); ``coverage`` brings the 1/2/3-sigma coverage closest to nominal
-    (``COVERAGE_GRID``). The tracking settings (rule, measurement noise) are left at their defaults: the caller
-    records the ones the predictions were tracked with."""
+    (``COVERAGE_GRID``). With ``shares`` (of these predictions: ``mor.lnet.lost.arena_shares``) each group of
+    objects also gets a lost probability, fitted with its multiplier by the same criterion (``LOST_GRID`` for the
+    coverage). The tracking settings (rule, measurement noise) are left at their defaults: the caller records the
+    ones the predictions were tracked with."""
     if criterion not in CRITERIA:
         raise ValueError(f"calibration criterion: expected one of {CRITERIA}, got {criterion!r}")
     p = predictions
     scale, kappa_scale = (_scale, _nll_kappa_scale) if criterion == "nll" else (_coverage_scale, _coverage_kappa_scale)
     agent_d2 = _d2(p.agent_pose[:, :2], p.agent_mean, p.agent_tril)
     object_d2 = _d2(p.object_truth, p.object_mean, p.object_tril)
-    own, shared = scale(object_d2[p.present & ~p.confusable]), scale(object_d2[p.present & p.confusable])
+    groups = (p.present & ~p.confusable, p.present & p.confusable)
+    if shares is None:
+        own, shared = ((fitted, 0.0) if (fitted := scale(object_d2[rows])) is not None else None for rows in groups)
+    else:
+        half_log_det = _half_log_det(p.object_tril)
+        own, shared = (_lost_fit(criterion, object_d2[rows], half_log_det[rows], shares.share[rows], shares.area)
+                       for rows in groups)
+    if own is None:  # every object shares its colour: one group
+        own, shared = shared or (1.0, 0.0), None
     heading = kappa_scale(wrap_angle(p.agent_pose[:, 2] - p.heading), np.asarray(p.kappa, np.float64))
-    return Calibration(scale(agent_d2) or 1.0, own if own is not None else (shared or 1.0), heading,
-                       shared_colour_scale=shared if own is not None else None)
+    return Calibration(scale(agent_d2) or 1.0, own[0], heading, shared_colour_scale=shared and shared[0],
+                       lost_own=own[1], lost_shared=shared[1] if shares is not None and shared else None)
 
 
 #: The measurement-noise multipliers ``fit_measurement_noise`` chooses from: powers of two, 1/64 to 64.
@@ -364,24 +410,27 @@ def fit_measurement_noise(model: LNet, episodes: list[tuple[PoseEstimate, dict[s
     return best, {f"{own:g} x {shared:g}": value for (own, shared), value in tried.items()}
 
 
-def calibrate(model: LNet, episodes: list[tuple[PoseEstimate, dict[str, torch.Tensor]]], criterion: str = "nll"
-              ) -> tuple[Predictions, Calibration, dict[str, float]]:
+def calibrate(model: LNet, episodes: list[tuple[PoseEstimate, dict[str, torch.Tensor]]], criterion: str = "nll",
+              arena: Arena | None = None) -> tuple[Predictions, Calibration, dict[str, float], ArenaShares | None]:
     """Calibrate ``model`` (with its current tracking rule) on validation episodes (``frame_estimates``): the
     filter's measurement noise (``fit_measurement_noise``), then the scales (``fit_calibration`` by
-    ``criterion``). Returns the uncalibrated predictions with the chosen noise, the calibration (recording the rule
-    and the noise) and the noise search's tries."""
+    ``criterion``; with ``arena``, also the objects' lost probabilities). Returns the uncalibrated predictions with
+    the chosen noise, the calibration (recording the rule and the noise), the noise search's tries and the
+    predictions' arena shares (None without ``arena``)."""
     noise, tried = fit_measurement_noise(model, episodes)
     predictions = track_episodes(model, episodes)
-    return predictions, tracked_calibration(model, predictions, criterion), tried
+    shares = None if arena is None else object_arena_shares(predictions, arena)
+    return predictions, tracked_calibration(model, predictions, criterion, shares), tried, shares
 
 
-def tracked_calibration(model: LNet, predictions: Predictions, criterion: str) -> Calibration:
-    """``fit_calibration`` of ``predictions`` by ``criterion``, recording the tracking rule and measurement noise
-    ``model`` tracked them with."""
+def tracked_calibration(model: LNet, predictions: Predictions, criterion: str, shares: ArenaShares | None = None
+                        ) -> Calibration:
+    """``fit_calibration`` of ``predictions`` by ``criterion`` (with lost probabilities when ``shares`` is
+    given), recording the tracking rule and measurement noise ``model`` tracked them with."""
     data_association = model.config.tracker == "filter" and model.filter.data_association
     noise = model.filter.measurement_noise if model.config.tracker == "filter" else (1.0, 1.0)
-    return replace(fit_calibration(predictions, criterion), data_association=data_association, noise_own=noise[0],
-                   noise_shared=noise[1])
+    return replace(fit_calibration(predictions, criterion, shares), data_association=data_association,
+                   noise_own=noise[0], noise_shared=noise[1])
 
 
 # ---- metrics ----------------------------------------------------------------------------------------------------
@@ -460,6 +509,14 @@ def coverage_by_sightings(predictions: Predictions, object_d2: np.ndarray, objec
                for k in SIGMAS}}
 
 
+def _object_groups(p: Predictions) -> dict[str, np.ndarray]:
+    """The groups of objects the metrics report, (N, K) bool each."""
+    return {"seen": p.present & p.seen, "all": p.present, "visible": p.present & p.visible,
+            "unseen": p.present & ~p.seen,  # seen: at or before this frame; visible: now; unseen: not yet
+            "visible_in_reach": p.present & p.visible & (_object_distance(p) <= PICK_RANGE),  # what PICK needs
+            "seen_confusable": p.present & p.seen & p.confusable}  # sharing their colour, not held
+
+
 def metrics(predictions: Predictions) -> dict[str, Any]:
     """NLL, errors, k-sigma coverage and reliability curves of ``predictions`` (JSON-ready)."""
     p = predictions
@@ -468,10 +525,7 @@ def metrics(predictions: Predictions) -> dict[str, Any]:
     object_d2 = _d2(p.object_truth, p.object_mean, p.object_tril)
     heading_error = np.abs(wrap_angle(p.agent_pose[:, 2] - p.heading))
     heading_mass = heading_central_mass(heading_error, p.kappa)
-    groups = {"seen": p.present & p.seen, "all": p.present, "visible": p.present & p.visible,
-              "unseen": p.present & ~p.seen,  # seen: at or before this frame; visible: now; unseen: not yet
-              "visible_in_reach": p.present & p.visible & (_object_distance(p) <= PICK_RANGE),  # what PICK needs
-              "seen_confusable": p.present & p.seen & p.confusable}  # sharing their colour, not held
+    groups = _object_groups(p)
     seen = groups["seen"]
     object_error = _object_error(p)
     nll = {
@@ -510,6 +564,40 @@ def metrics(predictions: Predictions) -> dict[str, Any]:
     }
 
 
+def object_arena_shares(predictions: Predictions, arena: Arena) -> ArenaShares:
+    """``mor.lnet.lost.arena_shares`` of the present objects of ``predictions`` (calibrated or not: the same)."""
+    p = predictions
+    return arena_shares(p.object_truth, p.object_mean, p.object_tril, p.present, arena)
+
+
+def stated_metrics(predictions: Predictions, lost: np.ndarray, shares: ArenaShares | None) -> dict[str, Any]:
+    """The objects' NLL, 1/2/3-sigma coverage and reliability under their stated belief (``mor.lnet.lost``): the
+    (calibrated) Gaussians of ``predictions`` with the lost probabilities ``lost`` (N, K); ``shares`` (of these
+    predictions) is needed where any is above 0. With no lost probability these are the Gaussian's own figures."""
+    p = predictions
+    if shares is None and np.any(lost > 0):
+        raise ValueError("stated_metrics: lost probabilities above 0 need the predictions' arena shares")
+    d2 = _d2(p.object_truth, p.object_mean, p.object_tril)
+    mass = region_mass(d2, lost, np.zeros(d2.shape) if shares is None else shares.share)
+    log_p = log_density(d2, _half_log_det(p.object_tril), lost, 1.0 if shares is None else shares.area)
+    groups = _object_groups(p)
+    return {"nll_objects": float(-log_p[p.present].mean()),
+            "coverage": {f"objects_{name}": {f"{k}sigma": float(np.mean(mass[groups[name]] <= NOMINAL_2D[k]))
+                                             if groups[name].any() else float("nan") for k in SIGMAS}
+                         for name in ("seen", "unseen", "all")},
+            "reliability_objects_seen": [float(np.mean(mass[groups["seen"]] <= level))
+                                         for level in RELIABILITY_LEVELS]}
+
+
+def calibrated_metrics(predictions: Predictions, calibration: Calibration, shares: ArenaShares | None = None
+                       ) -> dict[str, Any]:
+    """``metrics`` of ``predictions`` after ``calibration``, with the objects' stated belief (``stated_metrics``,
+    under the calibration's lost probabilities) as ``stated``."""
+    calibrated = calibration.apply(predictions, predictions.confusable)
+    return {**metrics(calibrated), "stated": stated_metrics(calibrated, calibration.lost(predictions.confusable),
+                                                            shares)}
+
+
 def headline(scored: dict[str, Any]) -> dict[str, Any]:
     """The figures the model card compares tracking rules and encoder precisions by, from ``metrics``."""
     errors = scored["object_position_error_m"]
@@ -517,4 +605,7 @@ def headline(scored: dict[str, Any]) -> dict[str, Any]:
             "agent_median_m": scored["agent_position_error_m"]["median"],
             "heading_median_deg": scored["heading_error_deg"]["median"], "nll_objects": scored["nll"]["objects"],
             "nll_heading": scored["nll"]["heading"], "coverage_objects_seen": scored["coverage"]["objects_seen"],
-            "coverage_agent": scored["coverage"]["agent_position"], "coverage_heading": scored["coverage"]["heading"]}
+            "coverage_agent": scored["coverage"]["agent_position"], "coverage_heading": scored["coverage"]["heading"],
+            **({"nll_objects_stated": scored["stated"]["nll_objects"],
+                "coverage_objects_seen_stated": scored["stated"]["coverage"]["objects_seen"]} if "stated" in scored
+               else {})}

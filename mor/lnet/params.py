@@ -76,6 +76,9 @@ class CalibrationParams(BaseModel):
     criterion: Literal["nll", "coverage"] = Field(
         "nll", description="how each uncertainty multiplier is chosen: the NLL's optimum, or the 1/2/3-sigma "
         "coverage closest to nominal; calibrate-lnet fits and reports both, and keeps this one")
+    lost_objects: bool = Field(
+        False, description="also fit, per group of objects, the probability that a belief is lost (the object "
+        "anywhere in the arena: mor.lnet.lost); calibrate-lnet reports every criterion with and without")
 
 
 class LNetParams(BaseModel):

@@ -40,7 +40,9 @@ class Estimates:
     """Calibrated world-frame estimates for N environments with n objects each (float32 numpy arrays).
 
     agent_mean (N, 2) m; agent_cov (N, 2, 2) m^2; heading (N,) rad, the mean of a von Mises with concentration
-    heading_kappa (N,); object_mean (N, n, 2) m; object_cov (N, n, 2, 2) m^2.
+    heading_kappa (N,); object_mean (N, n, 2) m; object_cov (N, n, 2, 2) m^2; object_lost (N, n) the probability
+    that an object's belief is lost, the object anywhere in the arena instead (``mor.lnet.lost``; 0 unless the
+    calibration fitted it).
     """
 
     agent_mean: np.ndarray
@@ -49,6 +51,7 @@ class Estimates:
     heading_kappa: np.ndarray
     object_mean: np.ndarray
     object_cov: np.ndarray
+    object_lost: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -159,10 +162,12 @@ class LNetRunner:
         last = PoseEstimate(*(getattr(tracked, name)[:, -1] for name in (
             "agent_mean", "agent_tril", "heading", "kappa")), tracked.object_mean[:, -1, :n_objects],
             tracked.object_tril[:, -1, :n_objects], frame=tracked.frame)
-        last = self.calibration.apply(last, torch.as_tensor(confusable(object_classes, held), device=self.device))
+        mask = confusable(object_classes, held)
+        last = self.calibration.apply(last, torch.as_tensor(mask, device=self.device))
         as_numpy = lambda t: t.float().cpu().numpy()  # noqa: E731
         return Estimates(as_numpy(last.agent_mean), _covariance(last.agent_tril), as_numpy(last.heading),
-                         as_numpy(last.kappa), as_numpy(last.object_mean), _covariance(last.object_tril))
+                         as_numpy(last.kappa), as_numpy(last.object_mean), _covariance(last.object_tril),
+                         self.calibration.lost(mask).astype(np.float32))
 
 
 def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str, Any] | None = None,

@@ -1,20 +1,33 @@
-"""Model shapes, frame conventions, the masked loss, training resumption, checkpoint checks, calibration."""
+"""Model shapes, frame conventions, the masked loss, training resumption, checkpoint checks, calibration (with the
+objects' lost probabilities: mor.lnet.lost)."""
 
 from __future__ import annotations
 
-from dataclasses import replace
+import json
+from dataclasses import asdict, replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
-from mor.lnet.calibration import Calibration
-from mor.lnet.evaluate import NOMINAL_2D, Predictions, fit_calibration, metrics
+from mor.errors import MorError
+from mor.lnet.calibration import Calibration, read_calibration
+from mor.lnet.evaluate import (
+    NOMINAL_2D,
+    Predictions,
+    calibrated_metrics,
+    fit_calibration,
+    metrics,
+    object_arena_shares,
+)
 from mor.lnet.frames import ego_to_world, world_to_ego
 from mor.lnet.loss import lnet_loss, nll_terms, previous_actions
+from mor.lnet.lost import arena_shares, fit_nll, region_mass
 from mor.lnet.model import LNet, ObjectAttention
 from mor.lnet.params import LNetConfig
 from mor.sim import geometry
+from mor.sim.arena import Arena
 
 SMALL = LNetConfig(feature_dim=32, mlp_hidden=32, lstm_hidden=32)
 
@@ -231,3 +244,75 @@ def test_heading_central_mass_agrees_with_the_interval_it_names() -> None:
             edge = heading_halfwidth(kappa, mass)
             assert heading_central_mass(np.array([edge]), np.array([kappa]))[0] == pytest.approx(mass, abs=1e-6)
     assert heading_central_mass(np.array([np.pi / 2]), np.array([0.0]))[0] == pytest.approx(0.5)
+
+
+ARENA = Arena.build("square", 6.0)
+
+
+def _lost_predictions(n: int, lost: float, seed: int = 0) -> Predictions:
+    """Objects anywhere in the arena; beliefs honest Gaussians (sigma 0.1 m), except that with probability
+    ``lost`` the mean is anywhere in the arena instead."""
+    rng = np.random.default_rng(seed)
+    predictions = _predictions(n, true_scale=0.1, stated_scale=0.1)
+    truth = rng.uniform(-2.9, 2.9, size=(n, 5, 2))
+    mean = np.where(rng.random((n, 5, 1)) < lost, rng.uniform(-2.9, 2.9, size=(n, 5, 2)),
+                    truth + rng.normal(scale=0.1, size=(n, 5, 2)))
+    return replace(predictions, object_truth=truth, object_mean=mean)
+
+
+def test_the_arena_share_of_an_ellipse_is_its_area_until_it_meets_the_walls() -> None:
+    truth = np.array([[[0.5, 0.0]], [[2.0, 0.0]], [[30.0, 0.0]]])  # d = 1, 4 and 60 sigma from the centre
+    mean, tril = np.zeros((3, 1, 2)), np.broadcast_to(np.eye(2) * 0.5, (3, 1, 2, 2))
+    share = arena_shares(truth, mean, tril, np.ones((3, 1), bool), ARENA).share[:, 0]
+    assert share[0] == pytest.approx(np.pi * 0.5 ** 2 / 36.0, rel=0.05)  # a disc of radius 0.5 m
+    assert share[1] == pytest.approx(np.pi * 2.0 ** 2 / 36.0, rel=0.05)
+    assert share[2] == 1.0  # the whole arena
+    assert np.all(arena_shares(truth, mean, tril, np.zeros((3, 1), bool), ARENA).share == 0.0)
+
+
+def test_without_a_lost_probability_the_stated_belief_is_the_gaussian() -> None:
+    d2 = np.array([0.5, 1.0, 4.0, 9.5])
+    assert np.allclose(region_mass(d2, 0.0, np.full(4, 0.3)), 1.0 - np.exp(-d2 / 2.0))
+    predictions = _predictions(500, true_scale=0.2, stated_scale=0.1)
+    scored = calibrated_metrics(predictions, Calibration(object_scale=2.0))
+    assert scored["stated"]["nll_objects"] == pytest.approx(scored["nll"]["objects"], rel=1e-6)
+    for k in (1, 2, 3):
+        assert scored["stated"]["coverage"]["objects_seen"][f"{k}sigma"] == scored["coverage"]["objects_seen"][
+            f"{k}sigma"]
+    with pytest.raises(ValueError, match="arena shares"):
+        calibrated_metrics(predictions, Calibration(lost_own=0.1))
+
+
+def test_em_recovers_the_scale_and_the_lost_probability() -> None:
+    predictions = _lost_predictions(3000, lost=0.2)
+    p = predictions
+    rows = p.present
+    d2 = (((p.object_truth - p.object_mean) / 0.1) ** 2).sum(-1)[rows]
+    scale, weight = fit_nll(d2, np.full(d2.shape, np.log(0.01)), 36.0)
+    assert scale == pytest.approx(1.0, rel=0.05) and weight == pytest.approx(0.2, abs=0.02)
+
+
+@pytest.mark.parametrize("criterion", ["nll", "coverage"])
+def test_lost_probabilities_make_a_heavy_tail_honest_where_no_gaussian_scale_can(criterion: str) -> None:
+    fit_on, test_on = _lost_predictions(3000, lost=0.2, seed=1), _lost_predictions(3000, lost=0.2, seed=2)
+    gaussian = fit_calibration(fit_on, criterion)
+    lost = fit_calibration(fit_on, criterion, object_arena_shares(fit_on, ARENA))
+    assert gaussian.lost_own == 0.0 and lost.lost_own == pytest.approx(0.2, abs=0.04)
+    shares = object_arena_shares(test_on, ARENA)
+
+    def worst(calibration: Calibration) -> float:
+        coverage = calibrated_metrics(test_on, calibration, shares)["stated"]["coverage"]["objects_seen"]
+        return max(abs(coverage[f"{k}sigma"] - NOMINAL_2D[k]) for k in (1, 2, 3))
+
+    assert worst(lost) < 0.03 < worst(gaussian)
+
+
+def test_a_calibration_file_keeps_its_lost_probabilities_and_refuses_impossible_ones(tmp_path: Path) -> None:
+    calibration = Calibration(object_scale=1.5, shared_colour_scale=3.0, lost_own=0.05, lost_shared=0.3)
+    path = tmp_path / "calibration.json"
+    path.write_text(json.dumps(asdict(calibration)))
+    assert read_calibration(path) == calibration
+    assert calibration.lost(np.array([[True, False]])).tolist() == [[0.3, 0.05]]
+    path.write_text(json.dumps(asdict(replace(calibration, lost_shared=1.0))))
+    with pytest.raises(MorError, match="lost_own and lost_shared must lie in"):
+        read_calibration(path)

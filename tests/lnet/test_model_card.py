@@ -35,8 +35,14 @@ def test_the_criterion_table_shows_each_criterion_s_multipliers_and_test_coverag
     scored = {"coverage_objects_seen": levels, "coverage_agent": levels, "coverage_heading": levels,
               "nll_objects": 1.0, "nll_heading": -1.5}
     fitted = {"agent_scale": 0.96, "object_scale": 0.9, "shared_colour_scale": 2.26, "kappa_scale": 1.918}
-    rows = criterion_table({"nll": fitted, "coverage": {**fitted, "kappa_scale": 2.2}},
-                           {"nll": scored, "coverage": scored}, "nll")
-    assert len(rows) == 4 and rows[0].count("|") == rows[1].count("|") == rows[2].count("|") == rows[3].count("|")
-    assert rows[2].startswith("| nll (used) | 0.960 | 0.900 / 2.260 | 1.918 | 0.400 / 0.860 / 0.990 |")
+    stated = {**scored, "coverage_objects_seen_stated": {"1sigma": 0.39, "2sigma": 0.87, "3sigma": 0.985},
+              "nll_objects_stated": 0.7}
+    rows = criterion_table({"nll": fitted, "coverage": {**fitted, "kappa_scale": 2.2},
+                            "nll+lost": {**fitted, "lost_own": 0.08, "lost_shared": 0.31}},
+                           {"nll": scored, "coverage": scored, "nll+lost": stated}, "nll+lost")
+    assert len(rows) == 5 and len({row.count("|") for row in rows}) == 1
+    assert rows[2].startswith("| nll | 0.960 | 0.900 / 2.260 | – | 1.918 | 0.400 / 0.860 / 0.990 | – |")
     assert rows[3].startswith("| coverage | 0.960 |") and "| 2.200 |" in rows[3] and rows[3].endswith("| -1.500 |")
+    assert rows[4].startswith("| nll+lost (used) | 0.960 | 0.900 / 2.260 | 0.080 / 0.310 | 1.918 | "
+                              "0.400 / 0.860 / 0.990 | 0.390 / 0.870 / 0.985 |")
+    assert "| 1.000 / 0.700 |" in rows[4]

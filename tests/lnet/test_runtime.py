@@ -69,6 +69,7 @@ def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration(conf
                                      torch.as_tensor(np.stack([_previous(frames, t) for t in range(5)], 1)))
     assert estimates.object_mean.shape == (3, 2, 2) and estimates.object_cov.shape == (3, 2, 2, 2)
     assert estimates.agent_cov.shape == (3, 2, 2) and estimates.heading_kappa.shape == (3,)
+    assert estimates.object_lost.shape == (3, 2) and not estimates.object_lost.any()  # none fitted
     assert all(v.dtype == np.float32 for v in vars(estimates).values())
     np.testing.assert_allclose(estimates.agent_mean, tracked.agent_mean[:, -1].numpy(), atol=1e-5)
     np.testing.assert_allclose(estimates.object_mean, tracked.object_mean[:, -1, :2].numpy(), atol=1e-5)
@@ -82,7 +83,7 @@ def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration(conf
 
 
 def test_the_streaming_step_scales_confusable_objects_by_their_own_scale_unless_held() -> None:
-    runner = _runner(Calibration(object_scale=0.5, shared_colour_scale=2.0))
+    runner = _runner(Calibration(object_scale=0.5, shared_colour_scale=2.0, lost_own=0.05, lost_shared=0.3))
     frame = _rollouts(n_envs=1, steps=1)[0]
     classes = np.array([[2, 8]])  # a blue cube and a blue sphere: confusable
     for held, scales in ((np.array([2]), (2.0, 2.0)), (np.array([1]), (2.0, 0.5))):  # nothing held; the sphere
@@ -92,6 +93,7 @@ def test_the_streaming_step_scales_confusable_objects_by_their_own_scale_unless_
         stated = (tril @ tril.transpose(-1, -2)).numpy()
         for k, scale in enumerate(scales):
             np.testing.assert_allclose(estimates.object_cov[0, k], scale ** 2 * stated[k], rtol=1e-4, atol=1e-7)
+        np.testing.assert_allclose(estimates.object_lost[0], [0.3 if scale == 2.0 else 0.05 for scale in scales])
 
 
 @pytest.mark.parametrize("config", TRACKERS, ids=["lstm", "filter"])
