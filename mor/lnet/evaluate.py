@@ -352,15 +352,18 @@ def fit_calibration(predictions: Predictions, criterion: str = "nll", shares: Ar
     kappa's multiplier is found numerically); ``coverage`` brings the 1/2/3-sigma coverage closest to nominal
     (``COVERAGE_GRID``). With ``shares`` (of these predictions: ``mor.lnet.lost.arena_shares``) each group of
     objects also gets a lost probability, fitted with its multiplier by the same criterion (``LOST_GRID`` for the
-    coverage). The tracking settings (rule, measurement noise) are left at their defaults: the caller records the
-    ones the predictions were tracked with."""
+    coverage). The objects' multipliers are fitted on the objects seen earlier: a belief of an object not yet seen
+    is the arena's prior, whatever the PoseNet says, so its errors would only pull the seen objects' fit (their
+    coverage is reported on its own). The tracking settings (rule, measurement noise) are left at their defaults:
+    the caller records the ones the predictions were tracked with."""
     if criterion not in CRITERIA:
         raise ValueError(f"calibration criterion: expected one of {CRITERIA}, got {criterion!r}")
     p = predictions
     scale, kappa_scale = (_scale, _nll_kappa_scale) if criterion == "nll" else (_coverage_scale, _coverage_kappa_scale)
     agent_d2 = _d2(p.agent_pose[:, :2], p.agent_mean, p.agent_tril)
     object_d2 = _d2(p.object_truth, p.object_mean, p.object_tril)
-    groups = (p.present & ~p.confusable, p.present & p.confusable)
+    seen = p.present & p.seen  # the beliefs of objects not yet seen are the prior's (see the docstring)
+    groups = (seen & ~p.confusable, seen & p.confusable)
     if shares is None:
         own, shared = ((fitted, 0.0) if (fitted := scale(object_d2[rows])) is not None else None for rows in groups)
     else:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -202,11 +202,13 @@ def lnet_identity(dataset_version: str, checkpoint_digest: str | None, calibrati
                   encoder_precision: str = "float32") -> str:
     """The dataset version; for a loaded checkpoint, the first 12 hex digits of its file's SHA-256 (another training
     run is another L-Net); unless it is the identity calibration, ``-cal`` and 8 hex digits of the calibration
-    (another tracking rule or other scales give other estimates: what a policy reads changes); and ``-bf16`` for
+    (another tracking rule or other scales give other estimates: what a policy reads changes; the objects' lost
+    probabilities, ``Estimates.object_lost``, are left out: no policy reads them); and ``-bf16`` for
     a bfloat16 encoder (its estimates differ a little from float32's)."""
     identity = dataset_version if checkpoint_digest is None else f"{dataset_version}-{checkpoint_digest}"
-    if calibration != Calibration():
-        identity += "-cal" + hashlib.sha256(json.dumps(asdict(calibration), sort_keys=True).encode()).hexdigest()[:8]
+    read = replace(calibration, lost_own=0.0, lost_shared=None)  # no policy reads the lost probabilities
+    if read != Calibration():
+        identity += "-cal" + hashlib.sha256(json.dumps(asdict(read), sort_keys=True).encode()).hexdigest()[:8]
     return identity + ("-bf16" if encoder_precision == "bfloat16" else "")
 
 

@@ -201,6 +201,12 @@ def test_the_tracking_rule_follows_the_calibration_and_a_mismatch_is_one_clear_e
     assert noisy.model.filter.measurement_noise == (0.5, 4.0) and noisy.calibration.shared_colour_scale == 2.0
     assert noisy.identity != runner.identity and checkpoint_identity(checkpoint) == noisy.identity
     assert load_lnet(checkpoint, calibrated=False).model.filter.measurement_noise == (1.0, 1.0)
+    # the objects' lost probabilities are no part of it: no policy reads them
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True, "noise_own": 0.5,
+                                                         "noise_shared": 4.0, "shared_colour_scale": 2.0,
+                                                         "lost_own": 0.1, "lost_shared": 0.3}))
+    lost = load_lnet(checkpoint)
+    assert lost.calibration.lost_shared == 0.3 and lost.identity == noisy.identity
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps(scales))  # a file from before the rule: fitted without it
     assert not load_lnet(checkpoint).model.filter.data_association
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": "yes"}))
