@@ -282,8 +282,8 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
                   "Gaussian; its median is 2 ln 2 = 1.39 where the stated uncertainty is honest. A median d² "
                   "below that (ellipses wider than most errors) together with a 3σ coverage below 0.989 (errors "
                   "beyond the stated tails) is a heavy-tailed error, which no single scale of a Gaussian covers at "
-                  "all three levels; the calibration's scale minimizes the NLL, i.e. it matches the mean of d², "
-                  "which the tail sets.", "",
+                  "all three levels (an NLL-fitted scale matches the mean of d², which the tail sets; see "
+                  "'Calibration criterion' for the lost probabilities that cover the tail).", "",
                   *sightings_table(by_sightings), ""]
     lines += [
         f"![error against time since seen]({figures['since_seen']})", "",
