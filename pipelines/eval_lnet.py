@@ -81,7 +81,7 @@ def run(profile: Profile) -> dict[str, Any]:
     reliability = {f"{name} ({when})": result[key]["reliability"][name]
                    for key, when in (("before_calibration", "before"), ("after_calibration", "after"))
                    for name in ("agent_position", "objects_seen", "heading")}
-    if calibration.lost_own or calibration.lost_shared:  # the objects' stated belief differs from its Gaussian
+    if calibration.lost_own or calibration.lost_shared is not None:  # lost probabilities fitted: a stated belief
         reliability["objects_seen (after, stated)"] = result["after_calibration"]["stated"]["reliability_objects_seen"]
     write_reliability_diagram(card / "reliability.png", np.asarray(result["before_calibration"]["reliability"]
                               ["nominal"]), {k: np.asarray(v) for k, v in reliability.items()},

@@ -136,9 +136,9 @@ def _object_calibration(calibration: dict[str, Any]) -> str:
 def _lost_cell(calibration: dict[str, Any]) -> str:
     """A calibration's lost probabilities (own / shared colour) as one cell; "–" where none was fitted."""
     own, shared = calibration.get("lost_own", 0.0), calibration.get("lost_shared")
-    if not own and not shared:
+    if not own and shared is None:
         return "–"
-    return f"{own:.3f} / {_number(shared, 3)}"
+    return f"{own:.3f} / {own if shared is None else shared:.3f}"  # None: the same as own
 
 
 _HEADLINE_COLUMNS = ("objects seen earlier, median (m) | in view, median (m) | agent, median (m) | object NLL | "

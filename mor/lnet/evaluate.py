@@ -330,7 +330,7 @@ def _lost_fit(criterion: str, d2: np.ndarray, half_log_det: np.ndarray, share: n
 
 def _half_log_det(tril: np.ndarray) -> np.ndarray:
     """log sqrt(det cov) of lower Cholesky factors (..., 2, 2)."""
-    return np.log(np.abs(tril[..., 0, 0] * tril[..., 1, 1]))
+    return np.log(np.abs(tril[..., 0, 0])) + np.log(np.abs(tril[..., 1, 1]))
 
 
 #: How ``fit_calibration`` chooses each multiplier: the NLL's optimum, or the 1/2/3-sigma coverage closest to
@@ -346,13 +346,14 @@ def criterion_name(criterion: str, lost_objects: bool) -> str:
 
 def fit_calibration(predictions: Predictions, criterion: str = "nll", shares: ArenaShares | None = None
                     ) -> Calibration:
-    """Multipliers of the stated uncertainty fitted on ``predictions``, per group of objects (confusable: sharing
-    their colour with another and not held; the others), for the agent and for the heading's kappa, by
-    ``criterion``: ``nll`` minimizes the NLL (for a 2-D Gaussian scaled by s the optimum is s^2 = mean(d^2) / 2;
-    kappa's multiplier is found numerically); ``coverage`` brings the 1/2/3-sigma coverage closest to nominal
-    (``COVERAGE_GRID``). With ``shares`` (of these predictions: ``mor.lnet.lost.arena_shares``) each group of
-    objects also gets a lost probability, fitted with its multiplier by the same criterion (``LOST_GRID`` for the
-    coverage). The objects' multipliers are fitted on the objects seen earlier: a belief of an object not yet seen
+    """Multipliers of the stated uncertainty fitted on ``predictions``, per group of objects seen earlier
+    (confusable: sharing their colour with another and not held; the others), for the agent and for the heading's
+    kappa, by ``criterion``: ``nll`` minimizes the NLL (for a 2-D Gaussian scaled by s the optimum is s^2 =
+    mean(d^2) / 2; kappa's multiplier is found numerically); ``coverage`` brings the 1/2/3-sigma coverage closest
+    to nominal (``COVERAGE_GRID``). With ``shares`` (of these predictions: ``mor.lnet.lost.arena_shares``) each
+    group of objects also gets a lost probability, fitted with its multiplier by the same criterion (the NLL by
+    expectation-maximization, ``mor.lnet.lost.fit_nll``; the coverage over ``COVERAGE_GRID`` x ``LOST_GRID``,
+    whose w stops at 0.5). The objects' multipliers are fitted on the objects seen earlier only: a belief of an object not yet seen
     is the arena's prior, whatever the PoseNet says, so its errors would only pull the seen objects' fit (their
     coverage is reported on its own). The tracking settings (rule, measurement noise) are left at their defaults:
     the caller records the ones the predictions were tracked with."""

@@ -10,10 +10,11 @@ the object is anywhere in the arena,
 
 the outlier model of robust estimation. Its k-sigma-equivalent region is its highest-density region holding the
 2-D Gaussian's k-sigma mass (39.3%, 86.5%, 98.9%). Within the arena that region is an ellipse of the Gaussian
-(the uniform part is flat there), so the truth, at Mahalanobis distance d, lies inside the region of mass p
-exactly when ``region_mass`` = (1 - w) (1 - exp(-d^2 / 2)) + w |E_d & arena| / area <= p, E_d the ellipse through
-the truth. The Gaussian's mass beyond the walls is counted as inside, so a region's mass is if anything
-over-stated and the coverage conservative. E_d does not change when the Gaussian is scaled (the truth's
+(the uniform part is flat there), so the truth, at Mahalanobis distance d, is counted inside the region of mass
+p when ``region_mass`` = (1 - w) (1 - exp(-d^2 / 2)) + w |E_d & arena| / area <= p, E_d the ellipse through the
+truth. The Gaussian's mass beyond the walls is counted as if inside E_d (beyond the walls the region is a smaller
+ellipse), so ``region_mass`` can only over-state the region's mass: a truth counted inside is inside, and the
+coverage is conservative. E_d does not change when the Gaussian is scaled (the truth's
 Mahalanobis distance scales with it), so ``arena_shares`` is computed once per set of predictions.
 
 Shapes: N frames, K object slots; R rows (flattened frames and slots), M arena points. Positions in metres.
@@ -81,8 +82,9 @@ def arena_shares(truth: np.ndarray, mean: np.ndarray, tril: np.ndarray, rows: np
 
 
 def region_mass(d2: np.ndarray, weight: np.ndarray | float, share: np.ndarray) -> np.ndarray:
-    """The mass of the stated belief's highest-density region that just reaches the truth: the truth lies inside
-    the k-sigma-equivalent region exactly when this is <= the k-sigma mass. d2: the truth's squared Mahalanobis
+    """The mass of the stated belief's highest-density region that just reaches the truth (or a little more, see
+    the module docstring): the truth is counted inside the k-sigma-equivalent region when this is <= the k-sigma
+    mass. d2: the truth's squared Mahalanobis
     distance under the (calibrated) Gaussian; weight: the lost probability w; share: ``ArenaShares.share``."""
     return (1.0 - weight) * (1.0 - np.exp(-0.5 * d2)) + weight * share
 
@@ -91,8 +93,9 @@ def log_density(d2: np.ndarray, half_log_det: np.ndarray, weight: np.ndarray | f
     """log p(truth) of the stated belief; d2 as in ``region_mass``; half_log_det: log sqrt(det cov) of the
     (calibrated) Gaussian; area: the arena's (m^2)."""
     gaussian = -0.5 * d2 - math.log(2.0 * math.pi) - half_log_det
-    return np.logaddexp(np.log1p(-np.minimum(weight, 1.0 - 1e-12)) + gaussian,
-                        np.log(np.maximum(weight, 1e-300)) - math.log(area))
+    with np.errstate(divide="ignore"):  # w = 0 or 1: one term is log 0 = -inf, which logaddexp absorbs
+        return np.logaddexp(np.log1p(-np.asarray(weight, np.float64)) + gaussian,
+                            np.log(np.asarray(weight, np.float64)) - math.log(area))
 
 
 def fit_nll(d2: np.ndarray, half_log_det: np.ndarray, area: float) -> tuple[float, float]:

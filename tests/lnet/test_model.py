@@ -23,7 +23,7 @@ from mor.lnet.evaluate import (
 )
 from mor.lnet.frames import ego_to_world, world_to_ego
 from mor.lnet.loss import lnet_loss, nll_terms, previous_actions
-from mor.lnet.lost import arena_shares, fit_nll, region_mass
+from mor.lnet.lost import arena_shares, fit_nll, log_density, region_mass
 from mor.lnet.model import LNet, ObjectAttention
 from mor.lnet.params import LNetConfig
 from mor.sim import geometry
@@ -273,6 +273,9 @@ def test_the_arena_share_of_an_ellipse_is_its_area_until_it_meets_the_walls() ->
 def test_without_a_lost_probability_the_stated_belief_is_the_gaussian() -> None:
     d2 = np.array([0.5, 1.0, 4.0, 9.5])
     assert np.allclose(region_mass(d2, 0.0, np.full(4, 0.3)), 1.0 - np.exp(-d2 / 2.0))
+    far = np.array([3000.0])  # a Gaussian's log density far out, not floored
+    assert log_density(far, np.zeros(1), 0.0, 36.0)[0] == pytest.approx(-1500.0 - np.log(2.0 * np.pi))
+    assert log_density(far, np.zeros(1), 1.0, 36.0)[0] == pytest.approx(-np.log(36.0))  # all lost: uniform
     predictions = _predictions(500, true_scale=0.2, stated_scale=0.1)
     scored = calibrated_metrics(predictions, Calibration(object_scale=2.0))
     assert scored["stated"]["nll_objects"] == pytest.approx(scored["nll"]["objects"], rel=1e-6)
