@@ -5,7 +5,8 @@ tried. With the filter tracker, both tracking rules (with and without data assoc
 measurement noise, then the scales: ``mor.lnet.evaluate.calibrate``) and scored on validation, side by side in
 ``tracking_rules``: the evidence for ``lnet.data_association`` (the model card's table). For the chosen rule the
 scales are also fitted by the other criterion (``lnet.calibration.criterion``: the NLL, or the coverage), each
-with and without the objects' lost probabilities (``lnet.calibration.lost_objects``, ``mor.lnet.lost``), and
+with and without the objects' lost probabilities and search belief (``lnet.calibration.lost_objects``,
+``mor.lnet.lost``, ``mor.lnet.search``), and
 all are scored on validation, in ``criteria`` (keyed ``nll``, ``coverage``, ``nll+lost``, ``coverage+lost``).
 """
 
@@ -25,7 +26,7 @@ from mor.lnet.evaluate import (
     frame_estimates,
     headline,
     metrics,
-    object_arena_shares,
+    stated_inputs,
     tracked_calibration,
 )
 from mor.sim.arena import Arena
@@ -47,13 +48,13 @@ def run(profile: Profile) -> dict[str, Any]:
     for rule in rules:
         runner.model.use_data_association(rule)
         fits[rule] = calibrate(runner.model, episodes, criterion, arena if lost else None)
-    predictions, calibration, tried, shares = fits[chosen]
+    predictions, calibration, tried, inputs = fits[chosen]
     check_scales(calibration, paths.LNET_CALIBRATION)
-    after = {rule: calibrated_metrics(p, fitted, rule_shares) for rule, (p, fitted, _, rule_shares) in fits.items()}
-    shares = shares or object_arena_shares(predictions, arena)  # for the criteria with lost probabilities
+    after = {rule: calibrated_metrics(p, fitted, rule_inputs) for rule, (p, fitted, _, rule_inputs) in fits.items()}
+    inputs = inputs or stated_inputs(predictions, arena)  # for the criteria with lost probabilities (and search)
     name = criterion_name(criterion, lost)
     by_criterion = {criterion_name(other, with_lost): calibration if criterion_name(other, with_lost) == name else
-                    tracked_calibration(runner.model, predictions, other, shares if with_lost else None)
+                    tracked_calibration(runner.model, predictions, other, inputs if with_lost else None)
                     for with_lost in (False, True) for other in CRITERIA}  # the chosen rule's tracking
     payload = {**asdict(calibration), "dataset_version": runner.dataset_version, "criterion": name,
                "fitted_on": {"split": "validation", "frames": int(len(predictions.frame))},
@@ -65,7 +66,7 @@ def run(profile: Profile) -> dict[str, Any]:
                    **asdict(fitted), "validation_after": headline(after[rule])}
                    for rule, (_, fitted, _, _) in fits.items()},
                "criteria": {other: {**asdict(fitted), "validation_after": headline(
-                   after[chosen] if other == name else calibrated_metrics(predictions, fitted, shares))}
+                   after[chosen] if other == name else calibrated_metrics(predictions, fitted, inputs))}
                    for other, fitted in by_criterion.items()},
                "seconds": round(time.perf_counter() - started, 1)}
     write_json(paths.LNET_CALIBRATION, payload)

@@ -16,15 +16,15 @@ from mor.lnet.calibration import calibration_from_values
 from mor.lnet.card import read_json, render_model_card, write_model_card
 from mor.lnet.evaluate import (
     Predictions,
+    StatedInputs,
     calibrated_metrics,
     headline,
     metrics,
-    object_arena_shares,
     predict,
     predict_live,
+    stated_inputs,
     story,
 )
-from mor.lnet.lost import ArenaShares
 from mor.lnet.figures import (
     write_estimate_gif,
     write_estimate_strip,
@@ -48,13 +48,13 @@ def run(profile: Profile) -> dict[str, Any]:
     manifest = read_manifest(paths.MANIFEST)
     predictions = predict(runner.model, paths.LEROBOT / "test", profile.lnet.eval_episodes, runner.device)
     arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
-    shares = object_arena_shares(predictions, arena)  # the objects' stated belief (mor.lnet.lost)
+    inputs = stated_inputs(predictions, arena)  # the objects' stated belief (mor.lnet.lost, mor.lnet.search)
 
-    def scored(p: Predictions, p_shares: ArenaShares) -> dict[str, Any]:
-        return {"before_calibration": metrics(p), "after_calibration": calibrated_metrics(p, calibration, p_shares)}
+    def scored(p: Predictions, p_inputs: StatedInputs) -> dict[str, Any]:
+        return {"before_calibration": metrics(p), "after_calibration": calibrated_metrics(p, calibration, p_inputs)}
 
     result = {"dataset_version": manifest_version(manifest), "calibration": asdict(calibration),
-              **scored(predictions, shares)}
+              **scored(predictions, inputs)}
     chosen = runner.encoder_precision  # the other precision on the same frames, for lnet.encoder_precision's choice
     other = "bfloat16" if chosen == "float32" else "float32"
     runner.model.use_encoder_precision(other)
@@ -62,19 +62,19 @@ def run(profile: Profile) -> dict[str, Any]:
     runner.model.use_encoder_precision(chosen)
     result["encoder_precision"] = {chosen: headline(result["after_calibration"]),
                                    other: headline(calibrated_metrics(reduced, calibration,
-                                                                      object_arena_shares(reduced, arena)))}
+                                                                      stated_inputs(reduced, arena)))}
     criteria = {name: calibration_from_values(values)  # each criterion's scales, on the test split
                 for name, values in read_json(paths.LNET_CALIBRATION).get("criteria", {}).items()}
     result["calibration_criteria"] = {name: headline(result["after_calibration"] if fitted == calibration else
-                                                     calibrated_metrics(predictions, fitted, shares))
+                                                     calibrated_metrics(predictions, fitted, inputs))
                                       for name, fitted in criteria.items()}
     # Real runs of the test split (its episodes are numbered in manifest order), reported on their own.
     test_sources = [row["source"] for row in manifest.to_pylist() if row["split"] == "test"]
     real = np.isin(predictions.episode, [i for i, source in enumerate(test_sources) if source == "real"])
-    result["real"] = scored(predictions.select(real), shares.select(real)) if real.any() else None
+    result["real"] = scored(predictions.select(real), inputs.select(real)) if real.any() else None
     if profile.lnet.oracle_episodes:  # the episodes the policies will produce: oracle-driven, tracked live
         live = predict_live(runner, profile.sim, "oracle", profile.lnet.oracle_episodes, ORACLE_SEED)
-        result["oracle"] = {"seed": ORACLE_SEED, **scored(live, object_arena_shares(live, arena))}
+        result["oracle"] = {"seed": ORACLE_SEED, **scored(live, stated_inputs(live, arena))}
     result["seconds"] = round(time.perf_counter() - started, 1)  # the metrics; the figures below are not counted
     write_json(card / "metrics.json", result)
 
@@ -83,6 +83,9 @@ def run(profile: Profile) -> dict[str, Any]:
                    for name in ("agent_position", "objects_seen", "heading")}
     if calibration.lost_own or calibration.lost_shared is not None:  # lost probabilities fitted: a stated belief
         reliability["objects_seen (after, stated)"] = result["after_calibration"]["stated"]["reliability_objects_seen"]
+    if calibration.search_find is not None:  # a search belief for objects not found: their own curve
+        reliability["objects_unseen (after, stated)"] = result["after_calibration"]["stated"][
+            "reliability_objects_unseen"]
     write_reliability_diagram(card / "reliability.png", np.asarray(result["before_calibration"]["reliability"]
                               ["nominal"]), {k: np.asarray(v) for k, v in reliability.items()},
                               "L-Net reliability on the test split")

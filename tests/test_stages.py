@@ -78,6 +78,9 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     assert calibration["criterion"] == "nll" and set(calibration["criteria"]) == criteria
     assert calibration["criteria"]["nll"]["object_scale"] == calibration["object_scale"]
     assert calibration["lost_own"] == 0.0 and 0.0 <= calibration["criteria"]["nll+lost"]["lost_own"] < 1.0
+    assert calibration["search_find"] is None  # with lost probabilities only: the search belief of mor.lnet.search
+    find = calibration["criteria"]["coverage+lost"]["search_find"]  # None where no belief is still unfound
+    assert find is None or 0.0 <= find <= 1.0
     assert set(metrics["calibration_criteria"]) == criteria
     assert metrics["after_calibration"]["stated"]["coverage"]["objects_seen"] == metrics["after_calibration"][
         "coverage"]["objects_seen"]  # without lost probabilities the stated belief is the Gaussian

@@ -3,7 +3,8 @@ beside the checkpoint it belongs to: multipliers of the stated uncertainty (the 
 objects' in two groups: objects of a colour of their own and objects sharing their colour with another, which the
 PoseNet confuses), the tracking rule they were fitted for (the filter's data association), the filter's
 measurement-noise multipliers for the two groups (``mor.lnet.filter``) and, when fitted, the two groups'
-probabilities that a belief is lost (``mor.lnet.lost``)."""
+probabilities that a belief is lost (``mor.lnet.lost``) and the one-look find probability of the search belief of
+objects not found yet (``mor.lnet.search``)."""
 
 from __future__ import annotations
 
@@ -29,7 +30,9 @@ class Calibration:
     concentration; whether they were fitted (and so must be used) with the filter's data association; the
     filter's measurement-noise multipliers (own colour, shared colour) they were fitted with; and the
     probability that an object's belief is lost, anywhere in the arena (``mor.lnet.lost``), for objects of their
-    own colour (``lost_own``) and confusable ones (``lost_shared``, None: the same as ``lost_own``)."""
+    own colour (``lost_own``) and confusable ones (``lost_shared``, None: the same as ``lost_own``); and the
+    probability that one look finds an object not found yet (``search_find``, ``mor.lnet.search``; None: not
+    fitted, such an object's stated belief is its Gaussian too)."""
 
     agent_scale: float = 1.0
     object_scale: float = 1.0
@@ -40,6 +43,7 @@ class Calibration:
     noise_shared: float = 1.0
     lost_own: float = 0.0
     lost_shared: float | None = None
+    search_find: float | None = None
 
     def apply(self, estimates: _T, confusable_mask: Any) -> _T:
         """A copy of ``estimates`` (any dataclass with ``agent_tril``, ``object_tril`` (..., K, 2, 2) and
@@ -92,14 +96,15 @@ def read_calibration(path: Path, dataset_version: str | None = None) -> Calibrat
 def calibration_from_values(values: dict[str, Any]) -> Calibration:
     """The ``Calibration`` a ``calibration.json`` (or one of its ``criteria``) records; ValueError, KeyError or
     TypeError where a field is missing or of the wrong kind."""
-    shared, lost_shared = values.get("shared_colour_scale"), values.get("lost_shared")
+    shared, lost_shared, find = (values.get(key) for key in ("shared_colour_scale", "lost_shared", "search_find"))
     calibration = Calibration(*(float(values[key]) for key in ("agent_scale", "object_scale", "kappa_scale")),
                               data_association=values.get("data_association", False),
                               shared_colour_scale=None if shared is None else float(shared),
                               noise_own=float(values.get("noise_own", 1.0)),
                               noise_shared=float(values.get("noise_shared", 1.0)),
                               lost_own=float(values.get("lost_own", 0.0)),
-                              lost_shared=None if lost_shared is None else float(lost_shared))
+                              lost_shared=None if lost_shared is None else float(lost_shared),
+                              search_find=None if find is None else float(find))
     if not isinstance(calibration.data_association, bool):
         raise TypeError(f"data_association must be true or false, got {calibration.data_association!r}")
     return calibration
@@ -107,7 +112,7 @@ def calibration_from_values(values: dict[str, Any]) -> Calibration:
 
 def check_scales(calibration: Calibration, path: Path) -> None:
     """One clear error unless every scale and multiplier is a positive finite number (NaN estimates give NaN
-    scales) and every lost probability lies in [0, 1)."""
+    scales), every lost probability lies in [0, 1) and the search belief's find probability in [0, 1]."""
     scales = (calibration.agent_scale, calibration.object_scale, calibration.kappa_scale, calibration.noise_own,
               calibration.noise_shared, calibration.object_scale if calibration.shared_colour_scale is None
               else calibration.shared_colour_scale)
@@ -117,3 +122,5 @@ def check_scales(calibration: Calibration, path: Path) -> None:
     lost = (calibration.lost_own, calibration.lost_own if calibration.lost_shared is None else calibration.lost_shared)
     if not all(0.0 <= weight < 1.0 for weight in lost):
         raise MorError(f"{path}: lost_own and lost_shared must lie in [0, 1), got {lost}; run mor calibrate-lnet")
+    if calibration.search_find is not None and not 0.0 <= calibration.search_find <= 1.0:
+        raise MorError(f"{path}: search_find must lie in [0, 1], got {calibration.search_find}; run mor calibrate-lnet")

@@ -126,6 +126,9 @@ def _object_calibration(calibration: dict[str, Any]) -> str:
     lost = _lost_cell(calibration)
     if lost != "–":
         scales += f"; lost with probability {lost} (own / shared colour: the object anywhere in the arena)"
+    if calibration.get("search_find") is not None:
+        scales += (f"; objects not found yet: the search belief, one look finding the object with probability "
+                   f"{calibration['search_find']:.2f}")
     noise = (calibration.get("noise_own", 1.0), calibration.get("noise_shared", 1.0))
     if noise == (1.0, 1.0):
         return scales
@@ -179,17 +182,19 @@ def criterion_table(criteria: dict[str, dict[str, Any]], scored: dict[str, dict[
                     ) -> list[str]:
     """One row per calibration criterion: its multipliers (``calibration.json``'s ``criteria``) and the test
     split's coverage and NLL under them (``metrics.json``'s ``calibration_criteria``); ``chosen`` is marked."""
-    rows = ["| criterion | agent σ × | objects σ × (own / shared colour) | objects lost (own / shared colour) | κ × | "
-            "objects seen earlier, Gaussian 1σ / 2σ / 3σ | objects seen earlier, stated 1σ / 2σ / 3σ | "
-            "agent, 1σ / 2σ / 3σ | heading, 1σ / 2σ / 3σ | object NLL, Gaussian / stated | heading NLL |",
-            "| --- |" + " --- |" * 10]
+    rows = ["| criterion | agent σ × | objects σ × (own / shared colour) | objects lost (own / shared colour) | "
+            "search: one look finds | κ × | objects seen earlier, Gaussian 1σ / 2σ / 3σ | objects seen earlier, "
+            "stated 1σ / 2σ / 3σ | objects not yet seen, stated 1σ / 2σ / 3σ | agent, 1σ / 2σ / 3σ | heading, "
+            "1σ / 2σ / 3σ | object NLL, Gaussian / stated | heading NLL |",
+            "| --- |" + " --- |" * 12]
     for name, fitted in criteria.items():
         r = scored[name]
-        stated = r.get("coverage_objects_seen_stated")
+        stated, unseen = r.get("coverage_objects_seen_stated"), r.get("coverage_objects_unseen_stated")
         rows.append(f"| {name}{' (used)' if name == chosen else ''} | {fitted['agent_scale']:.3f} | "
                     f"{fitted['object_scale']:.3f} / {_number(fitted.get('shared_colour_scale'), 3)} | "
-                    f"{_lost_cell(fitted)} | {fitted['kappa_scale']:.3f} | {_levels(r['coverage_objects_seen'])} | "
-                    f"{_levels(stated) if stated else '–'} | {_levels(r['coverage_agent'])} | "
+                    f"{_lost_cell(fitted)} | {_number(fitted.get('search_find'), 2)} | {fitted['kappa_scale']:.3f} | "
+                    f"{_levels(r['coverage_objects_seen'])} | {_levels(stated) if stated else '–'} | "
+                    f"{_levels(unseen) if unseen else '–'} | {_levels(r['coverage_agent'])} | "
                     f"{_levels(r['coverage_heading'])} | {r['nll_objects']:.3f} / "
                     f"{_number(r.get('nll_objects_stated'), 3)} | {r['nll_heading']:.3f} |")
     return rows
@@ -272,6 +277,14 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
                   f"{_lost_cell(calibration)} (own / shared colour), anywhere in the arena; its kσ region is its "
                   "highest-density region of the 2-D kσ mass (`mor/lnet/lost.py`; the streaming step returns the "
                   "probability as `Estimates.object_lost`). The other object rows are its Gaussian alone.", ""]
+    if calibration.get("search_find") is not None:
+        share = after.get("stated", {}).get("searching_share", {})
+        lines += ["An object whose belief has not found it yet (wider than 1 m) is stated by the search belief "
+                  "instead: more likely where the estimated camera cone has not pointed, each look finding the "
+                  f"object with probability {calibration['search_find']:.2f} (`mor/lnet/search.py`; evaluation "
+                  "only, the streaming step does not return it yet). Beliefs stated by it on the test split: "
+                  f"{_number(share.get('unseen'), 3)} of the objects not yet seen, {_number(share.get('seen'), 3)} "
+                  "of those seen earlier.", ""]
     lines += [
         f"![reliability]({figures['reliability']})", "",
     ]
@@ -300,7 +313,8 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
                   "3σ coverage closest to nominal at its worst level), each with and without the objects' lost "
                   "probabilities (`+lost`: the stated belief of an object is its Gaussian, or with that probability "
                   "anywhere in the arena; its kσ region is its highest-density region of the 2-D kσ mass, "
-                  "`mor/lnet/lost.py`), and the test split under each; `lnet.calibration.criterion` and "
+                  "`mor/lnet/lost.py`; and the search belief of the objects not found yet, `mor/lnet/search.py`), "
+                  "and the test split under each; `lnet.calibration.criterion` and "
                   "`lnet.calibration.lost_objects` choose which the L-Net uses. Without lost probabilities the "
                   "stated belief is the Gaussian.", "",
                   *criterion_table(calibration["criteria"], metrics["calibration_criteria"],

@@ -26,6 +26,7 @@ from mor.lnet.calibration import Calibration, confusable
 from mor.lnet.likelihoods import gaussian_nll, log_i0, mahalanobis_squared, von_mises_nll
 from mor.lnet.loss import previous_actions
 from mor.lnet.lost import ArenaShares, arena_shares, fit_nll, log_density, region_mass
+from mor.lnet.search import FIND_GRID, SearchLooks, not_found, search_log_density, search_looks, search_mass
 from mor.lnet.model import ESTIMATE_FIELDS, LNet, PoseEstimate
 from mor.lnet.runtime import LNetRunner
 from mor.sim.arena import Arena
@@ -344,16 +345,29 @@ def criterion_name(criterion: str, lost_objects: bool) -> str:
     return criterion + ("+lost" if lost_objects else "")
 
 
-def fit_calibration(predictions: Predictions, criterion: str = "nll", shares: ArenaShares | None = None
+def _search_fit(criterion: str, looks: SearchLooks, rows: np.ndarray) -> float | None:
+    """The search belief's one-look find probability (``FIND_GRID``) for the beliefs ``rows`` (N, K) by
+    ``criterion``: the NLL's minimum, or the 1/2/3-sigma coverage closest to nominal; None: no rows."""
+    if not rows.any():
+        return None
+    if criterion == "nll":
+        return float(FIND_GRID[int(np.argmin([-search_log_density(looks, q)[rows].mean() for q in FIND_GRID]))])
+    nominal = np.array([NOMINAL_2D[k] for k in SIGMAS])
+    worst = [np.abs((search_mass(looks, q)[rows][:, None] <= nominal).mean(0) - nominal).max() for q in FIND_GRID]
+    return float(FIND_GRID[int(np.argmin(worst))])
+
+
+def fit_calibration(predictions: Predictions, criterion: str = "nll", inputs: StatedInputs | None = None
                     ) -> Calibration:
     """Multipliers of the stated uncertainty fitted on ``predictions``, per group of objects seen earlier
     (confusable: sharing their colour with another and not held; the others), for the agent and for the heading's
     kappa, by ``criterion``: ``nll`` minimizes the NLL (for a 2-D Gaussian scaled by s the optimum is s^2 =
     mean(d^2) / 2; kappa's multiplier is found numerically); ``coverage`` brings the 1/2/3-sigma coverage closest
-    to nominal (``COVERAGE_GRID``). With ``shares`` (of these predictions: ``mor.lnet.lost.arena_shares``) each
-    group of objects also gets a lost probability, fitted with its multiplier by the same criterion (the NLL by
+    to nominal (``COVERAGE_GRID``). With ``inputs`` (of these predictions: ``stated_inputs``) each group of objects
+    also gets a lost probability, fitted with its multiplier by the same criterion (the NLL by
     expectation-maximization, ``mor.lnet.lost.fit_nll``; the coverage over ``COVERAGE_GRID`` x ``LOST_GRID``,
-    whose w stops at 0.5). The objects' multipliers are fitted on the objects seen earlier only: a belief of an object not yet seen
+    whose w stops at 0.5), and the search belief of the beliefs that have not found their object its find
+    probability (``_search_fit``, on those beliefs, whichever objects they are: the tracker cannot tell). The objects' multipliers are fitted on the objects seen earlier only: a belief of an object not yet seen
     is the arena's prior, whatever the PoseNet says, so its errors would only pull the seen objects' fit (their
     coverage is reported on its own). The tracking settings (rule, measurement noise) are left at their defaults:
     the caller records the ones the predictions were tracked with."""
@@ -365,17 +379,18 @@ def fit_calibration(predictions: Predictions, criterion: str = "nll", shares: Ar
     object_d2 = _d2(p.object_truth, p.object_mean, p.object_tril)
     seen = p.present & p.seen  # the beliefs of objects not yet seen are the prior's (see the docstring)
     groups = (seen & ~p.confusable, seen & p.confusable)
-    if shares is None:
+    if inputs is None:
         own, shared = ((fitted, 0.0) if (fitted := scale(object_d2[rows])) is not None else None for rows in groups)
     else:
-        half_log_det = _half_log_det(p.object_tril)
+        half_log_det, shares = _half_log_det(p.object_tril), inputs.shares
         own, shared = (_lost_fit(criterion, object_d2[rows], half_log_det[rows], shares.share[rows], shares.area)
                        for rows in groups)
     if own is None:  # every object shares its colour: one group
         own, shared = shared or (1.0, 0.0), None
     heading = kappa_scale(wrap_angle(p.agent_pose[:, 2] - p.heading), np.asarray(p.kappa, np.float64))
     return Calibration(scale(agent_d2) or 1.0, own[0], heading, shared_colour_scale=shared and shared[0],
-                       lost_own=own[1], lost_shared=shared[1] if shares is not None and shared else None)
+                       lost_own=own[1], lost_shared=shared[1] if inputs is not None and shared else None,
+                       search_find=None if inputs is None else _search_fit(criterion, inputs.looks, inputs.not_found))
 
 
 #: The measurement-noise multipliers ``fit_measurement_noise`` chooses from: powers of two, 1/64 to 64.
@@ -415,25 +430,25 @@ def fit_measurement_noise(model: LNet, episodes: list[tuple[PoseEstimate, dict[s
 
 
 def calibrate(model: LNet, episodes: list[tuple[PoseEstimate, dict[str, torch.Tensor]]], criterion: str = "nll",
-              arena: Arena | None = None) -> tuple[Predictions, Calibration, dict[str, float], ArenaShares | None]:
+              arena: Arena | None = None) -> tuple[Predictions, Calibration, dict[str, float], StatedInputs | None]:
     """Calibrate ``model`` (with its current tracking rule) on validation episodes (``frame_estimates``): the
     filter's measurement noise (``fit_measurement_noise``), then the scales (``fit_calibration`` by
-    ``criterion``; with ``arena``, also the objects' lost probabilities). Returns the uncalibrated predictions with
-    the chosen noise, the calibration (recording the rule and the noise), the noise search's tries and the
-    predictions' arena shares (None without ``arena``)."""
+    ``criterion``; with ``arena``, also the objects' lost probabilities and search belief). Returns the
+    uncalibrated predictions with the chosen noise, the calibration (recording the rule and the noise), the noise
+    search's tries and the predictions' ``StatedInputs`` (None without ``arena``)."""
     noise, tried = fit_measurement_noise(model, episodes)
     predictions = track_episodes(model, episodes)
-    shares = None if arena is None else object_arena_shares(predictions, arena)
-    return predictions, tracked_calibration(model, predictions, criterion, shares), tried, shares
+    inputs = None if arena is None else stated_inputs(predictions, arena)
+    return predictions, tracked_calibration(model, predictions, criterion, inputs), tried, inputs
 
 
-def tracked_calibration(model: LNet, predictions: Predictions, criterion: str, shares: ArenaShares | None = None
+def tracked_calibration(model: LNet, predictions: Predictions, criterion: str, inputs: StatedInputs | None = None
                         ) -> Calibration:
-    """``fit_calibration`` of ``predictions`` by ``criterion`` (with lost probabilities when ``shares`` is
-    given), recording the tracking rule and measurement noise ``model`` tracked them with."""
+    """``fit_calibration`` of ``predictions`` by ``criterion`` (with lost probabilities and the search belief when
+    ``inputs`` is given), recording the tracking rule and measurement noise ``model`` tracked them with."""
     data_association = model.config.tracker == "filter" and model.filter.data_association
     noise = model.filter.measurement_noise if model.config.tracker == "filter" else (1.0, 1.0)
-    return replace(fit_calibration(predictions, criterion, shares), data_association=data_association,
+    return replace(fit_calibration(predictions, criterion, inputs), data_association=data_association,
                    noise_own=noise[0], noise_shared=noise[1])
 
 
@@ -568,38 +583,67 @@ def metrics(predictions: Predictions) -> dict[str, Any]:
     }
 
 
-def object_arena_shares(predictions: Predictions, arena: Arena) -> ArenaShares:
-    """``mor.lnet.lost.arena_shares`` of the present objects of ``predictions`` (calibrated or not: the same)."""
-    p = predictions
-    return arena_shares(p.object_truth, p.object_mean, p.object_tril, p.present, arena)
+@dataclass(frozen=True)
+class StatedInputs:
+    """What the objects' stated belief needs of a set of predictions beyond their Gaussians: the arena shares of
+    the lost belief (``mor.lnet.lost``), the looks of the search belief (``mor.lnet.search``) and which beliefs
+    have not found their object (N, K), judged on the uncalibrated beliefs."""
+
+    shares: ArenaShares
+    looks: SearchLooks
+    not_found: np.ndarray
+
+    def select(self, rows: np.ndarray) -> StatedInputs:
+        """The inputs of the frames ``rows`` (as ``Predictions.select``)."""
+        return StatedInputs(self.shares.select(rows), self.looks.select(rows), self.not_found[rows])
 
 
-def stated_metrics(predictions: Predictions, lost: np.ndarray, shares: ArenaShares | None) -> dict[str, Any]:
-    """The objects' NLL, 1/2/3-sigma coverage and reliability under their stated belief (``mor.lnet.lost``): the
-    (calibrated) Gaussians of ``predictions`` with the lost probabilities ``lost`` (N, K); ``shares`` (of these
-    predictions) is needed where any is above 0. With no lost probability these are the Gaussian's own figures."""
+def stated_inputs(predictions: Predictions, arena: Arena) -> StatedInputs:
+    """``StatedInputs`` of the present objects of ``predictions`` (uncalibrated: which beliefs are not found is
+    judged on their own width)."""
     p = predictions
-    if shares is None and np.any(lost > 0):
-        raise ValueError("stated_metrics: lost probabilities above 0 need the predictions' arena shares")
+    return StatedInputs(arena_shares(p.object_truth, p.object_mean, p.object_tril, p.present, arena),
+                        search_looks(p.agent_mean, p.heading, p.object_truth, p.episode, arena),
+                        p.present & not_found(p.object_tril))
+
+
+def stated_metrics(predictions: Predictions, lost: np.ndarray, inputs: StatedInputs | None,
+                   search_find: float | None = None) -> dict[str, Any]:
+    """The objects' NLL, 1/2/3-sigma coverage and reliability under their stated belief: the (calibrated)
+    Gaussians of ``predictions`` with the lost probabilities ``lost`` (N, K) (``mor.lnet.lost``) and, with
+    ``search_find``, the search belief for the objects not found yet (``mor.lnet.search``); ``inputs`` (of these
+    predictions) is needed where any lost probability is above 0 or ``search_find`` is given. Without either these
+    are the Gaussian's own figures."""
+    p = predictions
+    if inputs is None and (np.any(lost > 0) or search_find is not None):
+        raise ValueError("stated_metrics: lost probabilities above 0 or a search belief need the StatedInputs")
     d2 = _d2(p.object_truth, p.object_mean, p.object_tril)
-    mass = region_mass(d2, lost, np.zeros(d2.shape) if shares is None else shares.share)
-    log_p = log_density(d2, _half_log_det(p.object_tril), lost, 1.0 if shares is None else shares.area)
+    mass = region_mass(d2, lost, np.zeros(d2.shape) if inputs is None else inputs.shares.share)
+    log_p = log_density(d2, _half_log_det(p.object_tril), lost, 1.0 if inputs is None else inputs.shares.area)
     groups = _object_groups(p)
+    searching = np.zeros_like(p.present) if search_find is None else inputs.not_found
+    if search_find is not None:
+        mass = np.where(searching, search_mass(inputs.looks, search_find), mass)
+        log_p = np.where(searching, search_log_density(inputs.looks, search_find), log_p)
     return {"nll_objects": float(-log_p[p.present].mean()),
             "coverage": {f"objects_{name}": {f"{k}sigma": float(np.mean(mass[groups[name]] <= NOMINAL_2D[k]))
                                              if groups[name].any() else float("nan") for k in SIGMAS}
                          for name in ("seen", "unseen", "all")},
             "reliability_objects_seen": [float(np.mean(mass[groups["seen"]] <= level))
-                                         for level in RELIABILITY_LEVELS]}
+                                         for level in RELIABILITY_LEVELS],
+            "reliability_objects_unseen": [float(np.mean(mass[groups["unseen"]] <= level))
+                                           for level in RELIABILITY_LEVELS],
+            "searching_share": {name: float(np.mean(searching[groups[name]])) if groups[name].any() else float("nan")
+                                for name in ("seen", "unseen")}}
 
 
-def calibrated_metrics(predictions: Predictions, calibration: Calibration, shares: ArenaShares | None = None
+def calibrated_metrics(predictions: Predictions, calibration: Calibration, inputs: StatedInputs | None = None
                        ) -> dict[str, Any]:
     """``metrics`` of ``predictions`` after ``calibration``, with the objects' stated belief (``stated_metrics``,
-    under the calibration's lost probabilities) as ``stated``."""
+    under the calibration's lost probabilities and search belief) as ``stated``."""
     calibrated = calibration.apply(predictions, predictions.confusable)
     return {**metrics(calibrated), "stated": stated_metrics(calibrated, calibration.lost(predictions.confusable),
-                                                            shares)}
+                                                            inputs, calibration.search_find)}
 
 
 def headline(scored: dict[str, Any]) -> dict[str, Any]:
@@ -611,5 +655,6 @@ def headline(scored: dict[str, Any]) -> dict[str, Any]:
             "nll_heading": scored["nll"]["heading"], "coverage_objects_seen": scored["coverage"]["objects_seen"],
             "coverage_agent": scored["coverage"]["agent_position"], "coverage_heading": scored["coverage"]["heading"],
             **({"nll_objects_stated": scored["stated"]["nll_objects"],
-                "coverage_objects_seen_stated": scored["stated"]["coverage"]["objects_seen"]} if "stated" in scored
+                "coverage_objects_seen_stated": scored["stated"]["coverage"]["objects_seen"],
+                "coverage_objects_unseen_stated": scored["stated"]["coverage"]["objects_unseen"]} if "stated" in scored
                else {})}

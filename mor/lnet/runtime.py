@@ -203,12 +203,14 @@ def lnet_identity(dataset_version: str, checkpoint_digest: str | None, calibrati
     """The dataset version; for a loaded checkpoint, the first 12 hex digits of its file's SHA-256 (another training
     run is another L-Net); unless it is the identity calibration, ``-cal`` and 8 hex digits of the calibration
     (another tracking rule or other scales give other estimates: what a policy reads changes; the objects' lost
-    probabilities, ``Estimates.object_lost``, are left out: no policy reads them); and ``-bf16`` for
+    probabilities, ``Estimates.object_lost``, and the search belief's find probability are left out: no policy
+    reads them); and ``-bf16`` for
     a bfloat16 encoder (its estimates differ a little from float32's)."""
     identity = dataset_version if checkpoint_digest is None else f"{dataset_version}-{checkpoint_digest}"
-    read = replace(calibration, lost_own=0.0, lost_shared=None)  # no policy reads the lost probabilities
+    read = replace(calibration, lost_own=0.0, lost_shared=None, search_find=None)  # what no policy reads
     if read != Calibration():
-        identity += "-cal" + hashlib.sha256(json.dumps(asdict(read), sort_keys=True).encode()).hexdigest()[:8]
+        hashed = {k: v for k, v in asdict(read).items() if k != "search_find"}  # added later: old hashes stand
+        identity += "-cal" + hashlib.sha256(json.dumps(hashed, sort_keys=True).encode()).hexdigest()[:8]
     return identity + ("-bf16" if encoder_precision == "bfloat16" else "")
 
 

@@ -19,7 +19,7 @@ from mor.lnet.evaluate import (
     calibrated_metrics,
     fit_calibration,
     metrics,
-    object_arena_shares,
+    stated_inputs,
 )
 from mor.lnet.frames import ego_to_world, world_to_ego
 from mor.lnet.loss import lnet_loss, nll_terms, previous_actions
@@ -282,8 +282,9 @@ def test_without_a_lost_probability_the_stated_belief_is_the_gaussian() -> None:
     for k in (1, 2, 3):
         assert scored["stated"]["coverage"]["objects_seen"][f"{k}sigma"] == scored["coverage"]["objects_seen"][
             f"{k}sigma"]
-    with pytest.raises(ValueError, match="arena shares"):
-        calibrated_metrics(predictions, Calibration(lost_own=0.1))
+    for needs_inputs in (Calibration(lost_own=0.1), Calibration(search_find=0.5)):
+        with pytest.raises(ValueError, match="StatedInputs"):
+            calibrated_metrics(predictions, needs_inputs)
 
 
 def test_em_recovers_the_scale_and_the_lost_probability() -> None:
@@ -299,9 +300,9 @@ def test_em_recovers_the_scale_and_the_lost_probability() -> None:
 def test_lost_probabilities_make_a_heavy_tail_honest_where_no_gaussian_scale_can(criterion: str) -> None:
     fit_on, test_on = _lost_predictions(3000, lost=0.2, seed=1), _lost_predictions(3000, lost=0.2, seed=2)
     gaussian = fit_calibration(fit_on, criterion)
-    lost = fit_calibration(fit_on, criterion, object_arena_shares(fit_on, ARENA))
+    lost = fit_calibration(fit_on, criterion, stated_inputs(fit_on, ARENA))
     assert gaussian.lost_own == 0.0 and lost.lost_own == pytest.approx(0.2, abs=0.04)
-    shares = object_arena_shares(test_on, ARENA)
+    shares = stated_inputs(test_on, ARENA)
 
     def worst(calibration: Calibration) -> float:
         coverage = calibrated_metrics(test_on, calibration, shares)["stated"]["coverage"]["objects_seen"]

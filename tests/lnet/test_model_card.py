@@ -36,13 +36,14 @@ def test_the_criterion_table_shows_each_criterion_s_multipliers_and_test_coverag
               "nll_objects": 1.0, "nll_heading": -1.5}
     fitted = {"agent_scale": 0.96, "object_scale": 0.9, "shared_colour_scale": 2.26, "kappa_scale": 1.918}
     stated = {**scored, "coverage_objects_seen_stated": {"1sigma": 0.39, "2sigma": 0.87, "3sigma": 0.985},
+              "coverage_objects_unseen_stated": {"1sigma": 0.41, "2sigma": 0.85, "3sigma": 0.98},
               "nll_objects_stated": 0.7}
     rows = criterion_table({"nll": fitted, "coverage": {**fitted, "kappa_scale": 2.2},
-                            "nll+lost": {**fitted, "lost_own": 0.08, "lost_shared": 0.31}},
+                            "nll+lost": {**fitted, "lost_own": 0.08, "lost_shared": 0.31, "search_find": 0.62}},
                            {"nll": scored, "coverage": scored, "nll+lost": stated}, "nll+lost")
     assert len(rows) == 5 and len({row.count("|") for row in rows}) == 1
-    assert rows[2].startswith("| nll | 0.960 | 0.900 / 2.260 | – | 1.918 | 0.400 / 0.860 / 0.990 | – |")
+    assert rows[2].startswith("| nll | 0.960 | 0.900 / 2.260 | – | – | 1.918 | 0.400 / 0.860 / 0.990 | – | – |")
     assert rows[3].startswith("| coverage | 0.960 |") and "| 2.200 |" in rows[3] and rows[3].endswith("| -1.500 |")
-    assert rows[4].startswith("| nll+lost (used) | 0.960 | 0.900 / 2.260 | 0.080 / 0.310 | 1.918 | "
-                              "0.400 / 0.860 / 0.990 | 0.390 / 0.870 / 0.985 |")
+    assert rows[4].startswith("| nll+lost (used) | 0.960 | 0.900 / 2.260 | 0.080 / 0.310 | 0.62 | 1.918 | "
+                              "0.400 / 0.860 / 0.990 | 0.390 / 0.870 / 0.985 | 0.410 / 0.850 / 0.980 |")
     assert "| 1.000 / 0.700 |" in rows[4]

@@ -1,0 +1,127 @@
+"""Objects not found yet: a belief that keeps where the agent has looked (negative information).
+
+Until the tracker finds an object its Gaussian is the arena prior, which says nothing about where the agent has
+already looked and seen nothing. A deployed searcher knows more: the object is less likely where the camera has
+pointed. The *search belief* states it on the arena grid (``mor.lnet.lost.arena_grid``): a point that was inside
+the estimated camera cone (``rules.CAMERA_FOV``, from the tracked agent pose) in c frames so far has density
+
+    p(x) proportional to (1 - q)^c(x)        (q: the probability that one look finds the object)
+
+so q = 0 is the uniform arena and q = 1 rules out every place looked at. q is fitted on validation
+(``lnet.calibration``: ``search_miss`` in ``calibration.json``, by the coverage criterion); occlusion and the
+PoseNet's misses of far objects are what keep it below 1. A belief counts as *not found* while its (uncalibrated)
+geometric-mean standard deviation is above ``NOT_FOUND_SIGMA``: the filter's prior is about 1.7 m wide and one
+sighting brings a belief to tenths of a metre.
+
+The belief is flat wherever the look counts tie, so its highest-density region of mass p is not unique: the truth
+is counted inside it by the randomized probability integral transform (Czado, Gneiting & Held 2009), mass =
+P(density > the truth's) + u P(density = the truth's) with u ~ U(0, 1) from a fixed seed, which is uniform on
+[0, 1] exactly when the belief is right, so the k-sigma coverage is nominal when the belief is honest.
+
+Shapes: N frames, K object slots, M grid points, C + 1 look-count bins (``MAX_LOOKS`` = C: counts above it are
+lumped with it). Positions in metres, headings in radians.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from mor.lnet.lost import arena_grid
+from mor.sim.arena import Arena
+from mor.sim.rules import CAMERA_FOV
+
+#: A belief wider than this (m, geometric mean of its standard deviations, uncalibrated) has not found its object.
+NOT_FOUND_SIGMA = 1.0
+#: Look counts above this are counted as this many ((1 - q)^64 < 0.002 for the q the fit can choose above 0.1).
+MAX_LOOKS = 64
+#: The one-look find probabilities q the calibration chooses from.
+FIND_GRID = np.linspace(0.0, 0.98, 50)
+_TIE_SEED = 0
+
+
+def in_view(points: np.ndarray, agent_xy: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """(T, M) whether each point (M, 2) lies inside the camera's horizontal field of view (``rules.CAMERA_FOV``,
+    any distance, as ``rules.visible`` without occlusion) of each pose: agent_xy (T, 2), heading (T,)."""
+    delta = points[None] - agent_xy[:, None]                                           # (T, M, 2)
+    forward = np.stack([np.cos(heading), np.sin(heading)], -1)[:, None]                # (T, 1, 2)
+    along = (delta * forward).sum(-1)
+    across = delta[..., 1] * forward[..., 0] - delta[..., 0] * forward[..., 1]
+    return np.abs(np.arctan2(across, along)) <= CAMERA_FOV / 2.0
+
+
+@dataclass(frozen=True)
+class SearchLooks:
+    """For a set of predictions: per frame (N,) the grid's look-count histogram ``histogram`` (N, C + 1) (how many
+    grid points were in view in 0, 1, ..., C or more frames of the episode so far, this one included), per frame
+    and slot the truth's own count ``truth_looks`` (N, K), a tie-breaking draw ``tie`` (N, K) in [0, 1), and the
+    area (m^2) one grid point stands for."""
+
+    histogram: np.ndarray
+    truth_looks: np.ndarray
+    tie: np.ndarray
+    cell_area: float
+
+    def select(self, rows: np.ndarray) -> SearchLooks:
+        """The looks of the frames ``rows`` (as ``Predictions.select``)."""
+        return SearchLooks(self.histogram[rows], self.truth_looks[rows], self.tie[rows], self.cell_area)
+
+
+def episode_looks(grid: np.ndarray, agent_xy: np.ndarray, heading: np.ndarray, truth: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """One episode's (histogram (T, C + 1), truth_looks (T, K)) of ``SearchLooks`` from the tracked agent pose
+    (agent_xy (T, 2), heading (T,)) and the objects' true positions truth (T, K, 2)."""
+    length = len(agent_xy)
+    counts = np.minimum(np.cumsum(in_view(grid, agent_xy, heading), 0), MAX_LOOKS)       # (T, M)
+    index = counts + (MAX_LOOKS + 1) * np.arange(length)[:, None]
+    histogram = np.bincount(index.ravel(), minlength=length * (MAX_LOOKS + 1)).reshape(length, MAX_LOOKS + 1)
+    truth_looks = np.empty(truth.shape[:2], np.int64)
+    seen_by = np.tril(np.ones((length, length), bool))                                   # frame s <= t
+    for slot in range(truth.shape[1]):
+        viewed = in_view(truth[:, slot], agent_xy, heading)                               # (s, t): t's truth, pose s
+        truth_looks[:, slot] = np.minimum((viewed & seen_by.T).sum(0), MAX_LOOKS)
+    return histogram, truth_looks
+
+
+def search_looks(agent_xy: np.ndarray, heading: np.ndarray, truth: np.ndarray, episode: np.ndarray, arena: Arena
+                 ) -> SearchLooks:
+    """``SearchLooks`` of frames of many episodes: tracked agent_xy (N, 2), heading (N,), true object positions
+    truth (N, K, 2), episode (N,) (each episode's frames contiguous and in order)."""
+    grid = arena_grid(arena)
+    parts = [episode_looks(grid, agent_xy[rows], heading[rows], truth[rows])
+             for rows in np.split(np.arange(len(episode)), np.flatnonzero(np.diff(episode)) + 1) if len(rows)]
+    histogram, truth_looks = (np.concatenate(column) for column in zip(*parts, strict=True))
+    tie = np.random.default_rng(_TIE_SEED).random(truth_looks.shape)
+    return SearchLooks(histogram, truth_looks, tie, arena.area() / len(grid))
+
+
+def _weights(find: float) -> np.ndarray:
+    """(C + 1,) the unnormalized density (1 - q)^c of a point looked at c times."""
+    return (1.0 - find) ** np.arange(MAX_LOOKS + 1, dtype=np.float64)
+
+
+def search_mass(looks: SearchLooks, find: float) -> np.ndarray:
+    """(N, K) the randomized mass of the search belief's highest-density region that reaches the truth (module
+    docstring): the truth is counted inside the k-sigma-equivalent region when this is <= the k-sigma mass."""
+    weights = _weights(find)
+    mass = looks.histogram * weights                                                   # (N, C + 1)
+    total = mass.sum(1, keepdims=True)
+    above = np.concatenate([np.zeros((len(mass), 1)), np.cumsum(mass, 1)], 1)           # mass of counts < c
+    rows = np.arange(len(mass))[:, None]
+    return (above[rows, looks.truth_looks] + looks.tie * mass[rows, looks.truth_looks]) / total
+
+
+def search_log_density(looks: SearchLooks, find: float) -> np.ndarray:
+    """(N, K) log p(truth) (per m^2) under the search belief; -inf where q = 1 rules the truth out."""
+    weights = _weights(find)
+    total = (looks.histogram * weights).sum(1, keepdims=True)
+    with np.errstate(divide="ignore"):
+        return np.log(weights[looks.truth_looks] / total) - math.log(looks.cell_area)
+
+
+def not_found(object_tril: np.ndarray) -> np.ndarray:
+    """(...) whether each belief (lower Cholesky factors (..., 2, 2), uncalibrated) has not found its object."""
+    return np.sqrt(np.abs(object_tril[..., 0, 0] * object_tril[..., 1, 1])) > NOT_FOUND_SIGMA
+

@@ -1,0 +1,71 @@
+"""The search belief of objects not found yet (mor.lnet.search): the camera cone, the look counts, and that an
+honest belief gets nominal coverage and its find probability back from the calibration."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mor.lnet.evaluate import NOMINAL_2D, SIGMAS, _search_fit
+from mor.lnet.lost import arena_grid
+from mor.lnet.search import SearchLooks, episode_looks, in_view, not_found, search_log_density, search_mass
+from mor.sim.arena import Arena
+
+ARENA = Arena.build("square", 6.0)
+
+
+def test_in_view_is_the_cameras_60_degree_cone_at_any_distance() -> None:
+    angles = np.deg2rad([0.0, 29.0, -29.0, 31.0, 180.0])
+    points = 2.5 * np.stack([np.cos(angles), np.sin(angles)], -1)
+    assert in_view(points, np.zeros((1, 2)), np.zeros(1))[0].tolist() == [True, True, True, False, False]
+    turned = in_view(points, np.zeros((1, 2)), np.array([np.pi]))[0]   # facing -x: only the point behind
+    assert turned.tolist() == [False, False, False, False, True]
+
+
+def test_look_counts_accumulate_over_the_episode() -> None:
+    grid = arena_grid(ARENA)
+    truth = np.array([[[2.0, 0.0]], [[2.0, 0.0]], [[2.0, 0.0]]])          # (T, K=1, 2): straight ahead at first
+    heading = np.array([0.0, np.pi, 0.0])
+    histogram, truth_looks = episode_looks(grid, np.zeros((3, 2)), heading, truth)
+    assert truth_looks[:, 0].tolist() == [1, 1, 2]
+    assert histogram.sum(1).tolist() == [len(grid)] * 3
+    assert histogram[0, 0] > histogram[0, 1] > 0 and histogram[2, 2] == histogram[0, 1]  # the same cone twice
+
+
+def _honest(find: float, rows: int = 4000, seed: int = 0) -> SearchLooks:
+    """Frames whose truth is drawn from the search belief itself (grid points looked at 0-3 times)."""
+    rng = np.random.default_rng(seed)
+    counts = rng.integers(0, 4, (rows, 200))                               # 200 grid points per frame
+    weights = (1.0 - find) ** counts
+    chosen = [rng.choice(200, p=w / w.sum()) for w in weights]
+    truth_looks = counts[np.arange(rows), chosen][:, None]
+    histogram = np.stack([np.bincount(c, minlength=65) for c in counts])
+    return SearchLooks(histogram, truth_looks, rng.random((rows, 1)), 0.01)
+
+
+def test_an_honest_search_belief_covers_nominally_and_a_uniform_one_does_not() -> None:
+    looks = _honest(0.6)
+    nominal = np.array([NOMINAL_2D[k] for k in SIGMAS])
+    coverage = (search_mass(looks, 0.6)[:, 0][:, None] <= nominal).mean(0)
+    assert np.all(np.abs(coverage - nominal) < 0.03)
+    uniform = (search_mass(looks, 0.0)[:, 0][:, None] <= nominal).mean(0)
+    assert np.abs(uniform - nominal).max() > 0.05                            # the test can fail
+    rows = np.ones((len(looks.truth_looks), 1), bool)
+    assert _search_fit("coverage", looks, rows) == pytest.approx(0.6, abs=0.07)
+    assert _search_fit("nll", looks, rows) == pytest.approx(0.6, abs=0.07)
+
+
+def test_log_density_integrates_to_one_and_rules_out_looked_places_at_find_one() -> None:
+    looks = _honest(0.5, rows=3)
+    for find in (0.0, 0.5):
+        density = np.exp(search_log_density(SearchLooks(looks.histogram, np.arange(65)[None].repeat(3, 0),
+                                                        np.zeros((3, 65)), 0.01), find))
+        assert np.allclose((density * looks.histogram * 0.01).sum(1), 1.0)
+    certain = SearchLooks(looks.histogram, np.array([[0], [1], [2]]), np.zeros((3, 1)), 0.01)
+    assert np.isneginf(search_log_density(certain, 1.0)[1:]).all()
+    assert np.all(search_mass(certain, 1.0)[1:] == 1.0)
+
+
+def test_not_found_is_a_belief_wider_than_a_metre() -> None:
+    tril = np.stack([np.eye(2) * 1.5, np.eye(2) * 0.3, np.diag([4.0, 0.2])])
+    assert not_found(tril).tolist() == [True, False, False]
