@@ -146,7 +146,7 @@ def _differences(first: Estimates, second: Estimates) -> dict[str, float]:
     """Per array of two ``Estimates`` of the same frames, the largest absolute difference (headings on the
     circle)."""
     def difference(name: str) -> np.ndarray:
-        delta = getattr(first, name) - getattr(second, name)
+        delta = getattr(first, name).astype(np.float64) - getattr(second, name)  # booleans count as 0 / 1
         return np.abs(wrap_angle(delta) if name == "heading" else delta)
 
     return {f.name: float(np.max(difference(f.name))) for f in fields(first)}

@@ -281,8 +281,9 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
         share = after.get("stated", {}).get("searching_share", {})
         lines += ["An object whose belief has not found it yet (wider than 1 m) is stated by the search belief "
                   "instead: more likely where the estimated camera cone has not pointed, each look finding the "
-                  f"object with probability {calibration['search_find']:.2f} (`mor/lnet/search.py`; evaluation "
-                  "only, the streaming step does not return it yet). Beliefs stated by it on the test split: "
+                  f"object with probability {calibration['search_find']:.2f} (`mor/lnet/search.py`; the streaming "
+                  "step marks those beliefs, `Estimates.object_searching`, and `SearchMap` keeps the looks in a "
+                  "running loop). Beliefs stated by it on the test split: "
                   f"{_number(share.get('unseen'), 3)} of the objects not yet seen, {_number(share.get('seen'), 3)} "
                   "of those seen earlier.", ""]
     lines += [

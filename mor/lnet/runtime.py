@@ -28,6 +28,7 @@ from mor.lnet.calibration import CALIBRATION_FILE, Calibration, confusable, read
 from mor.lnet.checkpoint import load_checkpoint, model_from_checkpoint
 from mor.lnet.model import LNet, PoseEstimate
 from mor.lnet.params import LNetConfig
+from mor.lnet.search import not_found
 from mor.sim.rules import N_ACTIONS
 
 
@@ -42,7 +43,8 @@ class Estimates:
     agent_mean (N, 2) m; agent_cov (N, 2, 2) m^2; heading (N,) rad, the mean of a von Mises with concentration
     heading_kappa (N,); object_mean (N, n, 2) m; object_cov (N, n, 2, 2) m^2; object_lost (N, n) the probability
     that an object's belief is lost, the object anywhere in the arena instead (``mor.lnet.lost``; 0 unless the
-    calibration fitted it).
+    calibration fitted it); object_searching (N, n) bool the belief has not found its object yet, so its stated
+    belief is the search belief (``mor.lnet.search``: ``SearchMap`` with ``Calibration.search_find``).
     """
 
     agent_mean: np.ndarray
@@ -52,6 +54,7 @@ class Estimates:
     object_mean: np.ndarray
     object_cov: np.ndarray
     object_lost: np.ndarray
+    object_searching: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -163,11 +166,12 @@ class LNetRunner:
             "agent_mean", "agent_tril", "heading", "kappa")), tracked.object_mean[:, -1, :n_objects],
             tracked.object_tril[:, -1, :n_objects], frame=tracked.frame)
         mask = confusable(object_classes, held)
-        last = self.calibration.apply(last, torch.as_tensor(mask, device=self.device))
         as_numpy = lambda t: t.float().cpu().numpy()  # noqa: E731
+        searching = not_found(as_numpy(last.object_tril))  # judged on the uncalibrated belief
+        last = self.calibration.apply(last, torch.as_tensor(mask, device=self.device))
         return Estimates(as_numpy(last.agent_mean), _covariance(last.agent_tril), as_numpy(last.heading),
                          as_numpy(last.kappa), as_numpy(last.object_mean), _covariance(last.object_tril),
-                         self.calibration.lost(mask).astype(np.float32))
+                         self.calibration.lost(mask).astype(np.float32), searching)
 
 
 def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str, Any] | None = None,

@@ -125,3 +125,32 @@ def not_found(object_tril: np.ndarray) -> np.ndarray:
     """(...) whether each belief (lower Cholesky factors (..., 2, 2), uncalibrated) has not found its object."""
     return np.sqrt(np.abs(object_tril[..., 0, 0] * object_tril[..., 1, 1])) > NOT_FOUND_SIGMA
 
+
+
+class SearchMap:
+    """The search belief in a running loop: per environment, the look counts of the arena grid, updated once per
+    frame from the streaming step's estimated pose (``LNetRunner.step``), for the objects whose
+    ``Estimates.object_searching`` is True.
+
+    grid (M, 2) the arena grid's points (m); counts (N, M) how many frames of the episode so far each point was in
+    view (capped at ``MAX_LOOKS``); cell_area (m^2) the area one point stands for.
+    """
+
+    def __init__(self, arena: Arena, n_envs: int) -> None:
+        self.grid = arena_grid(arena)
+        self.cell_area = arena.area() / len(self.grid)
+        self.counts = np.zeros((n_envs, len(self.grid)), np.int64)
+
+    def update(self, agent_mean: np.ndarray, heading: np.ndarray) -> None:
+        """Count this frame's looks: agent_mean (N, 2) m and heading (N,) rad, the estimated poses."""
+        self.counts = np.minimum(self.counts + in_view(self.grid, agent_mean, heading), MAX_LOOKS)
+
+    def reset(self, done: np.ndarray) -> None:
+        """Forget the looks of the environments where ``done`` (N,) bool is True (a new episode)."""
+        self.counts[np.asarray(done, bool)] = 0
+
+    def density(self, find: float) -> np.ndarray:
+        """(N, M) the search belief's density (per m^2) at the grid points, for one-look find probability ``find``
+        (``Calibration.search_find``)."""
+        weights = (1.0 - find) ** self.counts
+        return weights / (weights.sum(1, keepdims=True) * self.cell_area)

@@ -18,6 +18,7 @@ from mor.lnet.checkpoint import CheckpointMismatch, signature
 from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig, LNetParams
 from mor.lnet.runtime import LNetRunner, ObservationMismatch, checkpoint_identity, load_lnet
+from mor.lnet.search import not_found
 
 SMALL = LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)
 SIZE = 16
@@ -70,7 +71,9 @@ def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration(conf
     assert estimates.object_mean.shape == (3, 2, 2) and estimates.object_cov.shape == (3, 2, 2, 2)
     assert estimates.agent_cov.shape == (3, 2, 2) and estimates.heading_kappa.shape == (3,)
     assert estimates.object_lost.shape == (3, 2) and not estimates.object_lost.any()  # none fitted
-    assert all(v.dtype == np.float32 for v in vars(estimates).values())
+    assert all(v.dtype == np.float32 for k, v in vars(estimates).items() if k != "object_searching")
+    uncalibrated = tracked.object_tril[:, -1, :2].numpy()  # 'not found' is judged before the calibration's x 0.5
+    np.testing.assert_array_equal(estimates.object_searching, not_found(uncalibrated))
     np.testing.assert_allclose(estimates.agent_mean, tracked.agent_mean[:, -1].numpy(), atol=1e-5)
     np.testing.assert_allclose(estimates.object_mean, tracked.object_mean[:, -1, :2].numpy(), atol=1e-5)
     tril = tracked.agent_tril[:, -1]

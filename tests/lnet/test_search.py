@@ -8,7 +8,15 @@ import pytest
 
 from mor.lnet.evaluate import NOMINAL_2D, SIGMAS, _search_fit
 from mor.lnet.lost import arena_grid
-from mor.lnet.search import SearchLooks, episode_looks, in_view, not_found, search_log_density, search_mass
+from mor.lnet.search import (
+    SearchLooks,
+    SearchMap,
+    episode_looks,
+    in_view,
+    not_found,
+    search_log_density,
+    search_mass,
+)
 from mor.sim.arena import Arena
 
 ARENA = Arena.build("square", 6.0)
@@ -69,3 +77,19 @@ def test_log_density_integrates_to_one_and_rules_out_looked_places_at_find_one()
 def test_not_found_is_a_belief_wider_than_a_metre() -> None:
     tril = np.stack([np.eye(2) * 1.5, np.eye(2) * 0.3, np.diag([4.0, 0.2])])
     assert not_found(tril).tolist() == [True, False, False]
+
+
+def test_the_streaming_search_map_counts_what_the_episode_looks_count() -> None:
+    rng = np.random.default_rng(1)
+    agent_xy, heading = rng.uniform(-2.0, 2.0, (6, 2)), rng.uniform(-np.pi, np.pi, 6)
+    histogram, _ = episode_looks(arena_grid(ARENA), agent_xy, heading, np.zeros((6, 1, 2)))
+    search = SearchMap(ARENA, n_envs=2)
+    for t in range(6):
+        search.update(np.stack([agent_xy[t], agent_xy[0]]), np.array([heading[t], heading[0]]))
+        assert np.bincount(search.counts[0], minlength=65).tolist() == histogram[t].tolist()
+    assert search.counts[1].max() == 6                                     # the second env kept looking one way
+    density = search.density(0.5)
+    assert np.allclose(density.sum(1) * search.cell_area, 1.0)
+    assert density[1].min() < density[1].max()                             # looked-at places are less likely
+    search.reset(np.array([False, True]))
+    assert search.counts[1].sum() == 0 and search.counts[0].sum() > 0
