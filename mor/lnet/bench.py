@@ -143,10 +143,11 @@ def benchmark_streaming(model: LNet, calibration: Calibration, sim: SimConfig, n
 
 
 def _differences(first: Estimates, second: Estimates) -> dict[str, float]:
-    """Per array of two ``Estimates`` of the same frames, the largest absolute difference (headings on the
+    """Per float array of two ``Estimates`` of the same frames, the largest absolute difference (headings on the
     circle)."""
     def difference(name: str) -> np.ndarray:
-        delta = getattr(first, name).astype(np.float64) - getattr(second, name)  # booleans count as 0 / 1
+        delta = getattr(first, name) - getattr(second, name)
         return np.abs(wrap_angle(delta) if name == "heading" else delta)
 
-    return {f.name: float(np.max(difference(f.name))) for f in fields(first)}
+    return {f.name: float(np.max(difference(f.name))) for f in fields(first)
+            if getattr(first, f.name).dtype != np.bool_}  # flags (object_searching) have no size of difference
