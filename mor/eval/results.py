@@ -26,3 +26,12 @@ def merge_rows(existing: list[dict[str, Any]], new: list[dict[str, Any]]) -> lis
     merged = {row_key(row): row for row in existing}
     merged.update({row_key(row): row for row in new})
     return sorted(merged.values(), key=lambda row: tuple(str(v) for v in row_key(row)))
+
+
+def repoint_policy_digests(row: dict[str, Any], renamed: dict[str, str]) -> bool:
+    """Replace, in ``row``'s ``played_by.policies``, each policy digest that ``renamed`` maps (old -> new: the same
+    weights in a new file format); whether anything changed."""
+    policies = (row.get("played_by") or {}).get("policies") or {}
+    changed = {task: renamed[digest] for task, digest in policies.items() if digest in renamed}
+    policies.update(changed)
+    return bool(changed)

@@ -1,6 +1,7 @@
 """L-Net checkpoints: what they store, how they are written, and the check that they fit the run that loads them.
 
-A checkpoint is a ``torch.save`` dict holding the ``signature`` (``config``: the ``LNetConfig``, which names the
+A checkpoint is a ``torch.save`` dict of plain values and tensors (read with ``weights_only=True``: loading a
+crafted file runs nothing) holding the ``signature`` (``config``: the ``LNetConfig``, which names the
 tracker; ``dataset_version``; ``image_size``), the training ``params`` and ``step``, and the ``model`` weights
 (plus the optimizer state in the resumable ``checkpoint.pt``).
 """
@@ -12,10 +13,10 @@ from typing import Any
 
 import torch
 
-from mor.atomic import atomic_output
 from mor.errors import MorError
 from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig
+from mor.tensor_files import load_plain, save_plain
 
 
 class CheckpointMismatch(MorError):
@@ -45,11 +46,8 @@ def load_checkpoint(path: Path, expected: dict[str, Any], device: torch.device |
     ``LNetConfig``, so a checkpoint written before a config field existed has that field's default."""
     if not Path(path).is_file():
         raise MorError(f"{path}: no L-Net checkpoint; run mor train-lnet first")
-    try:
-        saved = torch.load(path, map_location=device, weights_only=False)
-    except Exception as error:  # noqa: BLE001 - torch raises many kinds for a damaged file
-        raise MorError(f"{path}: not a readable L-Net checkpoint ({type(error).__name__}); retrain or re-fetch it")\
-            from None
+    saved = load_plain(path, "L-Net checkpoint", "use a checkpoint written by mor train-lnet",
+                       "retrain or re-fetch it", device)
     if not isinstance(saved, dict) or not {"config", "model", "dataset_version", "image_size"} <= saved.keys():
         raise MorError(f"{path}: not an L-Net checkpoint (it lacks config, model, dataset_version or image_size)")
     saved["config"] = LNetConfig(**saved["config"]).model_dump()
@@ -70,6 +68,5 @@ def load_model(path: Path, expected: dict[str, Any], device: torch.device | str)
 
 
 def save_checkpoint(path: Path, payload: dict[str, Any]) -> None:
-    """``torch.save`` through a temporary name, renamed when complete."""
-    with atomic_output(path) as partial:
-        torch.save(payload, partial)
+    """``payload`` to ``path`` as plain values, through a temporary name (``mor.tensor_files.save_plain``)."""
+    save_plain(payload, path)

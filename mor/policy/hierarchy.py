@@ -39,7 +39,7 @@ def skill_mask(task: Task) -> np.ndarray:
     return mask
 
 
-POLICY_FILE = "policy.pth"  # a trained policy for inference: sb3-contrib's MaskableActorCriticPolicy.save
+POLICY_FILE = "policy.pth"  # a trained policy for inference: ``mor.policy.policy_file`` (weights + architecture)
 
 
 class Skill:
@@ -56,10 +56,10 @@ class Skill:
 
     @classmethod
     def load(cls, path: Path, deterministic: bool = True) -> Skill:
-        """The policy saved at ``path`` (a ``policy.pth``)."""
-        from sb3_contrib.common.maskable.policies import MaskableActorCriticPolicy  # noqa: PLC0415 - torch here only
+        """The policy saved at ``path`` (a ``policy.pth``), loaded without unpickling (``mor.policy.policy_file``)."""
+        from mor.policy.policy_file import load_policy_file  # noqa: PLC0415 - SB3 only where a policy is loaded
 
-        return cls(MaskableActorCriticPolicy.load(path, device="cpu"), deterministic)
+        return cls(load_policy_file(path), deterministic)
 
     def act(self, vector: np.ndarray, mask: np.ndarray, rng: np.random.Generator | None = None) -> int:
         """vector (D,), mask (A,) -> one action."""

@@ -82,7 +82,7 @@ def test_training_writes_its_outputs_and_resumes_from_the_checkpoint(tmp_path: P
     make = lambda params: lambda: make_training_env("pick", "gt_pose", SIM, params)  # noqa: E731
     first = train_policy(make(TINY_PPO), TINY_PPO, signature, tmp_path, 0, "pick", progress=False)
     assert first["steps"] == 64
-    for name in ("checkpoint.zip", "model.zip", "policy.pth", "meta.json", "log.csv", "learning_curve.png", "summary.json"):
+    for name in ("checkpoint.pt", "policy.pth", "meta.json", "log.csv", "learning_curve.png", "summary.json"):
         assert (tmp_path / name).is_file(), name
     longer = TINY_PPO.model_copy(update={"steps": 128})
     second = train_policy(make(longer), longer, signature, tmp_path, 0, "pick", progress=False)
@@ -91,7 +91,7 @@ def test_training_writes_its_outputs_and_resumes_from_the_checkpoint(tmp_path: P
         steps = [int(row["steps"]) for row in csv.DictReader(handle)]
     assert steps == sorted(steps) and steps[-1] == 128 and steps[0] < 64  # appended, not restarted
     other = PolicySignature.of("pick", "gt_pose", 2, "polygon", None)  # e.g. another world or another L-Net
-    with pytest.raises(ConfigError, match=r"checkpoint.zip: not resumed.*arena='square' but this run needs 'polygon'"):
+    with pytest.raises(ConfigError, match=r"checkpoint.pt: not resumed.*arena='square' but this run needs 'polygon'"):
         train_policy(make(longer), longer, other, tmp_path, 0, "pick", progress=False)
 
 
