@@ -157,15 +157,33 @@ def _paper_cell(value: tuple[float, float] | None) -> str:
     return "–" if value is None else f"{value[0]:.3f} ± {value[1]:.3f}"
 
 
+#: what a table's cells and marks mean; printed with every table (``mor eval tables``, the results card)
+LEGEND = ("Cells: mean ± std over the evaluation seeds' means [95% bootstrap interval]. Marks against the paper's "
+          "mean: ✓ our whole 95% interval is better (above it; below it for %E, where lower is better), ✗ our "
+          "whole interval is worse, ≈ our interval contains the paper's mean (no difference shown). † a stale row "
+          "(played by other policies or another L-Net than the committed ones). The (paper) columns are the "
+          "paper's published numbers, not ours.")
+
+
 def _better(ours: dict[str, Any], theirs: tuple[float, float], metric: str) -> bool:
     """Our mean better than the paper's (%E: lower is better)."""
     return ours["mean"] < theirs[0] if metric in LOWER_IS_BETTER else ours["mean"] > theirs[0]
 
 
+def verdict(ours: dict[str, Any], theirs: tuple[float, float], metric: str) -> str:
+    """"better" or "worse" when our whole 95% interval lies on that side of the paper's mean (%E: lower is
+    better), "no difference" when it contains it."""
+    low, high = ours["ci95"]
+    above, below = low > theirs[0], high < theirs[0]
+    if not (above or below):
+        return "no difference"
+    return "better" if above != (metric in LOWER_IS_BETTER) else "worse"
+
+
 def _beats(ours: dict[str, Any] | None, theirs: tuple[float, float] | None, metric: str) -> str:
     if ours is None or theirs is None:
         return ""
-    return " ✓" if _better(ours, theirs, metric) else " ✗"
+    return {"better": " ✓", "worse": " ✗", "no difference": " ≈"}[verdict(ours, theirs, metric)]
 
 
 def table_markdown(spec: TableSpec, rows: list[dict[str, Any]]) -> str:
@@ -195,11 +213,13 @@ def table_markdown(spec: TableSpec, rows: list[dict[str, Any]]) -> str:
 
 
 def write_table_figure(spec: TableSpec, rows: list[dict[str, Any]], path: Path) -> Path | None:
-    """Grouped bars per metric: each of our rows (95% CI as error bars) beside the paper's (± its std)."""
+    """Grouped bars per metric: each of our rows (95% CI as error bars) beside the paper's (± its std), in one
+    colour per row; stale rows cross-hatched and named so; rows not run yet listed in the legend."""
     import matplotlib  # noqa: PLC0415
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # noqa: PLC0415
+    from matplotlib.patches import Patch  # noqa: PLC0415
 
     from mor.atomic import atomic_output  # noqa: PLC0415
 
@@ -207,25 +227,36 @@ def write_table_figure(spec: TableSpec, rows: list[dict[str, Any]], path: Path) 
     present = [(line, row) for line, row in present if row is not None]
     if not present:
         return None
-    bars = []
-    for line, row in present:
-        means = [row["metrics"][m]["mean"] for m in METRIC_NAMES]
+    figure, ax = plt.subplots(figsize=(11, 5.6))
+    slots = sum(2 if line.paper else 1 for line, _ in present)
+    width, x, slot = 0.8 / slots, np.arange(len(METRIC_NAMES)), 0
+    handles = []
+    for k, (line, row) in enumerate(present):
+        colour = plt.get_cmap("tab10")(k % 10)
+        means = np.array([row["metrics"][m]["mean"] for m in METRIC_NAMES])
         errors = np.array([[row["metrics"][m]["mean"] - row["metrics"][m]["ci95"][0],
                             row["metrics"][m]["ci95"][1] - row["metrics"][m]["mean"]] for m in METRIC_NAMES]).T
-        bars.append((f"ours: {row_label(line, row)}", means, errors, None))
+        bars = [(means, errors, 0.9, "xx" if row.get("stale") else None)]
         if line.paper:
-            bars.append((f"paper: {line.label}", [v[0] if v else np.nan for v in line.paper],
-                         np.array([v[1] if v else 0.0 for v in line.paper]), "//"))
-    figure, ax = plt.subplots(figsize=(11, 5.2))
-    width = 0.8 / len(bars)
-    x = np.arange(len(METRIC_NAMES))
-    for k, (label, means, errors, hatch) in enumerate(bars):
-        ax.bar(x + (k - (len(bars) - 1) / 2) * width, means, width, yerr=errors, label=label, hatch=hatch,
-               capsize=2, alpha=0.85 if hatch is None else 0.45, color=plt.get_cmap("tab20")(k % 20))  # 20 distinct
+            bars.append((np.array([v[0] if v else np.nan for v in line.paper]),
+                         np.array([v[1] if v else 0.0 for v in line.paper]), 0.35, "//"))
+        for means_k, errors_k, alpha, hatch in bars:  # edges keep a zero-height bar visible as a line at 0
+            ax.bar(x + (slot - (slots - 1) / 2) * width, means_k, width, yerr=errors_k, hatch=hatch, capsize=2,
+                   color=colour, alpha=alpha, edgecolor="black", linewidth=0.6)
+            slot += 1
+        label = row_label(line, row) + (" † stale" if row.get("stale") else "")
+        handles.append(Patch(facecolor=colour, edgecolor="black", label=label))
+    handles += [Patch(facecolor="white", edgecolor="black", label="solid: ours (95% interval)"),
+                Patch(facecolor="white", edgecolor="black", hatch="//", label="hatched: the paper's (± its std)")]
+    missing = missing_rows(spec, rows)
+    if missing:
+        handles.append(Patch(facecolor="none", edgecolor="none",
+                             label="not run: " + ", ".join(m.label for m in missing)))
     ax.set_xticks(x, [METRIC_LABELS[m] for m in METRIC_NAMES])
-    ax.set_ylim(0, 1.05)
+    ax.set_ylim(-0.02, 1.05)
     ax.set_title(f"Table {spec.number}: {spec.title}")
-    ax.legend(fontsize=7, ncol=2, loc="upper center", bbox_to_anchor=(0.5, -0.08))  # below: never over a bar
+    columns = 2 if max(len(h.get_label()) for h in handles) > 45 else 3  # long labels: fewer columns, all visible
+    ax.legend(handles=handles, fontsize=7, ncol=columns, loc="upper center", bbox_to_anchor=(0.5, -0.07))
     ax.grid(axis="y", alpha=0.3)
     figure.tight_layout()
     with atomic_output(path) as partial:

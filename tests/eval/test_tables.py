@@ -94,3 +94,14 @@ def test_a_rows_paper_reference_is_the_table_line_that_shows_it() -> None:
     fine_tuned = {**_row("lnet", 0.5), "arena": "polygon", "policy_arena": "polygon"}
     assert paper_reference(fine_tuned)["pick_success"] == (0.545, 0.018)  # Table 3, fine-tuned
     assert paper_reference(_row("lnet_nearest_rule", 0.5)) is None
+
+
+def test_the_mark_against_the_paper_follows_our_interval_not_our_mean() -> None:
+    from mor.eval.tables import verdict
+
+    paper = (0.5, 0.02)
+    assert verdict({"mean": 0.6, "ci95": [0.55, 0.65]}, paper, "pick_success") == "better"
+    assert verdict({"mean": 0.52, "ci95": [0.45, 0.60]}, paper, "pick_success") == "no difference"
+    assert verdict({"mean": 0.4, "ci95": [0.35, 0.45]}, paper, "pick_success") == "worse"
+    assert verdict({"mean": 0.4, "ci95": [0.35, 0.45]}, paper, "energy_remaining") == "better"  # lower is better
+
