@@ -3,33 +3,31 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any, Literal, TypeVar
+from typing import Any, Literal, TypeVar
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, Field, ValidationError
 
 from mor.data.exploration import ExplorationParams
 from mor.errors import ConfigError
 from mor.lnet.params import LNetParams
+from mor.params_model import ParamsModel, Seeds
 from mor.policy.params import EvalParams, PolicyParams
+from mor.robot.params import RobotParams
 from mor.sim.config import SimConfig, format_validation_error
 
 DEFAULT_PARAMS = Path("params.yaml")
 PROFILES: tuple[str, ...] = ("tiny", "default", "paper")
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class OracleParams(_Strict):
+class OracleParams(ParamsModel):
     """The scripted oracle's evaluation: ``episodes`` per seed, mean +- std over ``seeds``."""
 
     episodes: int = Field(100, ge=1, le=100_000)
-    seeds: list[Annotated[int, Field(ge=0)]] = Field(default_factory=lambda: [0, 1, 2, 3, 4], min_length=1)
+    seeds: Seeds = Field(default_factory=lambda: [0, 1, 2, 3, 4])
 
 
-class DemoParams(_Strict):
+class DemoParams(ParamsModel):
     """The rendered demo episode of ``make repro``."""
 
     task: Literal["pick", "drop", "rearrange"] = "rearrange"
@@ -38,7 +36,7 @@ class DemoParams(_Strict):
     fps: int = Field(8, ge=1, le=60)
 
 
-class CollectParams(_Strict):
+class CollectParams(ParamsModel):
     """Random-action data collection (stage ``collect``)."""
 
     episodes: int = Field(2000, ge=1, le=1_000_000)
@@ -50,14 +48,14 @@ class CollectParams(_Strict):
     exploration: ExplorationParams = Field(default_factory=ExplorationParams)
 
 
-class BuildParams(_Strict):
+class BuildParams(ParamsModel):
     """Manifest, LeRobot splits and dataset card (stage ``build``)."""
 
     workers: int = Field(2, ge=1, le=1024)
     shard_episodes: int = Field(100, ge=1, description="episodes per build shard (the unit of resumption)")
 
 
-class SettingParams(_Strict):
+class SettingParams(ParamsModel):
     """How a setting's workspace (``mor --setting NAME``: paper Tables 3 and 4) reuses the main workspace's work.
 
     Paths of the main workspace are ``pipelines.paths.MAIN`` (two folders up from ``settings/NAME/``).
@@ -70,7 +68,7 @@ class SettingParams(_Strict):
                                                         "profile's policy.lnet_steps more")
 
 
-class Profile(_Strict):
+class Profile(ParamsModel):
     """One scale profile: every stage's parameters (``setting``: only in a setting's workspace)."""
 
     sim: SimConfig = Field(default_factory=SimConfig)
@@ -81,6 +79,7 @@ class Profile(_Strict):
     lnet: LNetParams = Field(default_factory=LNetParams)
     policy: PolicyParams = Field(default_factory=PolicyParams)
     evaluate: EvalParams = Field(default_factory=EvalParams)
+    robot: RobotParams = Field(default_factory=RobotParams)
     setting: SettingParams | None = None
 
 

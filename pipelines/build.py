@@ -7,7 +7,8 @@ from typing import Any
 
 from mor.config import Profile
 from mor.data.lerobot_build import build_splits
-from mor.data.manifest import build_manifest, decoded_files, manifest_version, write_manifest
+from mor.data.manifest import build_manifest, listed_files, manifest_version, write_manifest
+from mor.locking import writer_lock
 from mor.timing import timed
 from pipelines import paths
 from pipelines.collect import profile_shape
@@ -18,10 +19,18 @@ def run(profile: Profile, workers: int | None = None) -> dict[str, Any]:
     """Manifest of every episode file (simulated and real), the LeRobot splits, the dataset card; writes the
     counts and each part's wall time (seconds) to ``datasets/build_stats.json``.
 
-    Every new or changed episode file is decoded whole and every file's params are compared with the profile's
-    before anything is written (a bad file stops the build with one line naming it); the manifest is replaced
-    only after the splits are built, so it never lists a file the build could not read.
+    A file the manifest lists whose bytes changed is refused (as ``mor validate`` does); every new episode file is
+    decoded whole and every file's params are compared with the profile's before anything is written (a bad file
+    stops the build with one line naming it); the manifest is replaced only after the splits are built, so it never
+    lists a file the build could not read. One build at a time
+    (``writer_lock`` on ``datasets/lerobot``).
     """
+    with writer_lock(paths.LEROBOT, "mor build-dataset"):
+        return _build(profile, workers)
+
+
+def _build(profile: Profile, workers: int | None) -> dict[str, Any]:
+    """``run``'s work, under the lock."""
     from mor.data.card import write_dataset_card
     from mor.sim.arena import Arena
 
@@ -29,7 +38,7 @@ def run(profile: Profile, workers: int | None = None) -> dict[str, Any]:
     seconds: dict[str, float] = {}
     with timed(seconds, "manifest"):
         files = [path for folder in paths.EPISODE_FOLDERS for path in sorted(folder.glob("*.mcap"))]
-        table = build_manifest(files, paths.DATASETS, profile_shape(profile), decoded_files(paths.MANIFEST),
+        table = build_manifest(files, paths.DATASETS, profile_shape(profile), listed_files(paths.MANIFEST),
                                workers, progress=True)
         version = manifest_version(table)
     with timed(seconds, "lerobot"):

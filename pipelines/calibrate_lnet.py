@@ -29,6 +29,7 @@ from mor.lnet.evaluate import (
     stated_inputs,
     tracked_calibration,
 )
+from mor.locking import writer_lock
 from mor.sim.arena import Arena
 from pipelines import paths
 from pipelines.io import write_json
@@ -36,6 +37,14 @@ from pipelines.lnet_io import load_trained
 
 
 def run(profile: Profile) -> dict[str, Any]:
+    """Calibrate the trained L-Net of ``datasets/lnet/`` into its ``calibration.json``, holding that folder's lock
+    (shared with ``mor train-lnet``: the model is not replaced while it is calibrated)."""
+    with writer_lock(paths.LNET, "mor calibrate-lnet"):
+        return _calibrate(profile)
+
+
+def _calibrate(profile: Profile) -> dict[str, Any]:
+    """``run``'s work, under the lock."""
     started = time.perf_counter()
     runner = load_trained(profile, paths.LNET / "model.pt", calibrated=False)
     episodes = frame_estimates(runner.model, paths.LEROBOT / "validation", profile.lnet.calibration.max_episodes,

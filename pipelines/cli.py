@@ -98,13 +98,14 @@ def _check_task(task: str) -> str:
 
 
 def _parse_seeds(text: str) -> list[int]:
-    """``--seeds 0,1,2`` -> [0, 1, 2]; ConfigError unless every item is a non-negative integer."""
+    """``--seeds 0,1,2`` -> [0, 1, 2]; ConfigError unless the items are distinct non-negative integers."""
     try:
         seeds = [int(item) for item in text.split(",")]
     except ValueError:
         seeds = []
-    if not seeds or min(seeds) < 0:
-        raise ConfigError(f"--seeds: expected comma-separated non-negative integers such as 0,1,2 (got {text!r})")
+    if not seeds or min(seeds) < 0 or len(set(seeds)) < len(seeds):
+        raise ConfigError(f"--seeds: expected distinct comma-separated non-negative integers such as 0,1,2 "
+                          f"(got {text!r})")
     return seeds
 
 
@@ -278,7 +279,7 @@ def import_real_command(
     timestamps: Annotated[str, typer.Option(help="log (receive time) or header (message stamps).")] = "log",
 ) -> None:
     """Convert a real TurtleBot run into an episode MCAP; `mor build-dataset` then includes it (source=real)."""
-    from mor.data.real import import_rosbag, make_import_params, make_real_topics
+    from mor.data.real import episode_path, import_rosbag, make_import_params, make_real_topics, resolve_bag
 
     topics = make_real_topics(
         "import-real", image=image_topic, agent_pose=agent_pose_topic, object_pose=object_pose_topic,
@@ -293,7 +294,9 @@ def import_real_command(
         "import-real", n_objects=len(classes), object_classes=classes, target_positions=target_list,
         episode_id=episode_id, fps=fps, image_size=image_size, timestamps=timestamps,
     )
-    typer.echo(f"wrote {import_rosbag(bag, out_dir, topics, import_params)}")
+    existed = episode_path(out_dir, resolve_bag(bag), import_params).exists()
+    path = import_rosbag(bag, out_dir, topics, import_params)
+    typer.echo(f"{'replaced the existing episode' if existed else 'wrote'} {path}")
 
 
 @app.command("train-lnet")

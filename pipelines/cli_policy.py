@@ -42,6 +42,51 @@ def policy_train(
         typer.echo(f"{summary['label']}: {summary['steps']} steps; policy in {paths.POLICY_CARD / variant}")
 
 
+@policy_app.command("plan")
+def policy_plan(
+    variant: Annotated[list[str] | None, typer.Option("--variant", "-v", help="Variant(s) (repeat; default: the "
+                                                                               "profile's policy.variants).")] = None,
+    profile: ProfileOption = None,
+    params: ParamsOption = DEFAULT_PARAMS,
+) -> None:
+    """Print what `mor policy train` will run for each variant: each task's steps, start point and PPO parameters,
+    after the setting's overrides and policy.lnet_steps."""
+    from pipelines import train_policy  # noqa: PLC0415
+
+    config = load_profile(profile, params)
+    for name in variant or list(config.policy.variants):
+        if name not in TRAINABLE:
+            raise ConfigError(f"--variant: unknown variant {name!r}; choose one of {', '.join(TRAINABLE)}")
+        typer.echo(f"{name}:")
+        for task_plan in train_policy.plan(config, name):
+            ppo = task_plan.params.model_dump()
+            steps = ppo.pop("steps")
+            typer.echo(f"  {task_plan.task}: {steps:,} steps, {task_plan.why}"
+                       + (f" ({task_plan.start})" if task_plan.start is not None else ""))
+            typer.echo("    " + ", ".join(f"{key} {value}" for key, value in ppo.items()))
+
+
+@policy_app.command("convert")
+def policy_convert(
+    files: Annotated[list[Path] | None, typer.Argument(help="policy.pth files (default: every committed one, "
+                                                             "cards/policy/ and settings/*/cards/policy/).")] = None,
+) -> None:
+    """Convert policy files from SB3's pickled format to MOR's safe one, once. This UNPICKLES them (it runs what
+    they contain): only for files you trust, such as the ones this repository committed. The weights come out
+    bit-identical, and the results rows that recorded the old files' digests are re-pointed at the new ones."""
+    from pipelines import train_policy  # noqa: PLC0415
+
+    targets = files or sorted([*paths.POLICY_CARD.glob("*/*/policy.pth"),
+                               *paths.SETTINGS.glob(f"*/{paths.POLICY_CARD}/*/*/policy.pth")])
+    for path in targets:
+        if not path.is_file():
+            raise ConfigError(f"{path}: no such policy file")
+    converted = train_policy.convert_policies(targets)
+    for path, old, new in converted:
+        typer.echo(f"converted {path} (digest {old} -> {new}; weights identical)")
+    typer.echo(f"{len(converted)} of {len(targets)} policy files converted; the others were already safe")
+
+
 @eval_app.command("run")
 def eval_run(
     method: Annotated[str, typer.Option("--method", "-m", help="gt_pose, lnet, lnet_no_uncertainty, "
@@ -71,7 +116,7 @@ def eval_run(
 
 @eval_app.command("results")
 def eval_results(profile: ProfileOption = None) -> None:
-    """Gather every method's row of this profile into cards/results/results.json."""
+    """Gather every method's row of this profile into cards/results/results.json, its card and README.md's table."""
     from pipelines import evaluate  # noqa: PLC0415
 
     typer.echo(f"wrote {evaluate.collect_results(active_profile(profile))}")
@@ -105,7 +150,7 @@ def eval_tables(
     """Print Tables 1-4 from cards/results/results.json; a table with rows missing is one error naming them."""
     import json  # noqa: PLC0415
 
-    from mor.eval.tables import TABLES, require_complete, table_markdown  # noqa: PLC0415
+    from mor.eval.tables import LEGEND, TABLES, require_complete, table_markdown  # noqa: PLC0415
 
     path = paths.RESULTS_CARD / "results.json"
     if not path.is_file():
@@ -116,6 +161,7 @@ def eval_tables(
             raise ConfigError(f"--table: Table {number} is not built yet; available: {', '.join(map(str, TABLES))}")
         require_complete(TABLES[number], rows)
         typer.echo(f"Table {number}: {TABLES[number].title}\n{table_markdown(TABLES[number], rows)}\n")
+    typer.echo(LEGEND)
 
 
 @eval_app.command("cards")

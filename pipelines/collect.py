@@ -9,6 +9,7 @@ from typing import Any
 from mor.config import PROFILES, Profile, load_profile
 from mor.data.collect import CollectionSpec, ProfileShape, collect
 from mor.errors import ConfigError
+from mor.locking import writer_lock
 from pipelines import paths
 from pipelines.io import write_json
 
@@ -43,10 +44,11 @@ def rejected_files(report: Path | None, out_dir: Path) -> set[str]:
 def run(profile: Profile, out_dir: Path, stats: Path, rejected_from: Path | None, workers: int | None = None,
         backend: str | None = None, episodes: int | None = None) -> dict[str, Any]:
     """Collect the profile's missing episodes into ``out_dir`` (refusing a folder of another profile's episodes);
-    writes the counts and params to ``stats``."""
+    writes the counts and params to ``stats``. One collection into ``out_dir`` at a time (``writer_lock``)."""
     params = profile.collect
     shape = profile_shape(profile)
-    result = collect(shape.spec, out_dir, episodes or params.episodes, workers or params.workers,
-                     backend or params.backend, rejected_files(rejected_from, out_dir), shape=shape)
-    write_json(stats, {**result, "params": shape.spec.params()})
+    with writer_lock(out_dir, "mor collect"):
+        result = collect(shape.spec, out_dir, episodes or params.episodes, workers or params.workers,
+                         backend or params.backend, rejected_files(rejected_from, out_dir), shape=shape)
+        write_json(stats, {**result, "params": shape.spec.params()})
     return result

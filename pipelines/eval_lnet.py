@@ -5,10 +5,12 @@ from __future__ import annotations
 import shutil
 import time
 from dataclasses import asdict
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from mor.atomic import atomic_folder
 from mor.config import Profile
 from mor.data.manifest import manifest_version, read_manifest
 from mor.data.sequences import SequenceWindows
@@ -31,6 +33,7 @@ from mor.lnet.figures import (
     write_reliability_diagram,
     write_since_seen,
 )
+from mor.locking import writer_lock
 from mor.sim.arena import Arena
 from pipelines import paths
 from pipelines.io import write_json
@@ -40,9 +43,15 @@ ORACLE_SEED = 1000  # episode seeds 1e9 + i: disjoint from the collection's (see
 
 
 def run(profile: Profile) -> dict[str, Any]:
+    """Evaluate the trained L-Net and write its model card ``cards/lnet/``, published as a whole (``atomic_folder``:
+    a kill never leaves a truncated model.pt, or new weights beside old metrics), one writer at a time."""
+    with writer_lock(paths.LNET_CARD, "mor eval-lnet"), atomic_folder(paths.LNET_CARD, keep_existing=True) as card:
+        return _write_card(profile, card)
+
+
+def _write_card(profile: Profile, card: Path) -> dict[str, Any]:
+    """``run``'s work: the metrics, figures, weights and README of the model card, into the folder ``card``."""
     started = time.perf_counter()
-    card = paths.LNET_CARD
-    card.mkdir(parents=True, exist_ok=True)
     runner = load_trained(profile, paths.LNET / "model.pt")
     calibration = runner.calibration
     manifest = read_manifest(paths.MANIFEST)

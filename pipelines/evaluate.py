@@ -14,13 +14,15 @@ from typing import Any
 from mor.config import Profile, load_profile
 from mor.data.parallel import unordered_map
 from mor.errors import ConfigError
-from mor.eval.card import write_results_card
+from mor.eval.card import write_readme_results, write_results_card
 from mor.eval.methods import METHODS, MethodSpec, TrainedPolicies, method_spec
 from mor.eval.policy_card import write_policy_card
-from mor.eval.protocol import EpisodeKey, decider, metric_summaries, play_records, run_protocol
+from mor.eval.protocol import (EpisodeKey, decider, method_inputs, metric_summaries, play_records, run_protocol,
+                               sim_of)
 from mor.eval.results import ROW_KEYS, arena_label, is_zero_shot, merge_rows
 from mor.eval.tables import localisation_headline
 from mor.eval.video import write_policy_video
+from mor.locking import writer_lock
 from mor.policy.hierarchy import POLICY_FILE
 from mor.policy.names import TASKS, VARIANTS
 from mor.policy.observations import (BatchTracker, GroundTruthBatchTracker, RenderingTruthTracker, SingleTracker,
@@ -96,6 +98,15 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
     """Evaluate ``method_name`` with the profile's protocol; write its row to ``cards/results/rows/``.
     zero_shot: play the main workspace's policies in this setting (rows and records named ``<method>_zero_shot``)."""
     method = method_spec(method_name)
+    name = f"{method.name}_zero_shot" if zero_shot else method.name
+    command = f"mor eval run --method {method.name}" + (" --zero-shot" if zero_shot else "")
+    with writer_lock(paths.EVAL / f"{name}.jsonl", command):
+        return _evaluate(profile, profile_name, method, name, progress, zero_shot)
+
+
+def _evaluate(profile: Profile, profile_name: str, method: MethodSpec, name: str, progress: bool, zero_shot: bool
+              ) -> dict[str, Any]:
+    """``run``'s work, under the lock of the method's records: its records, then its row (named ``name``)."""
     sim, protocol = profile.sim, profile.evaluate
     policies, tracker_factory, train_steps, policy_arena = None, None, None, sim.arena
     played_by: dict[str, Any] = {}
@@ -106,7 +117,6 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
         train_steps = {task: json.loads((folder / "summary.json").read_text())["steps"]
                        for task, folder in folders.items()}
         policy_arena = read_signature(folders["pick"] / "meta.json").arena
-    name = f"{method.name}_zero_shot" if zero_shot else method.name
     run_jobs = None
     if protocol.workers > 1 or protocol.backend == "ray":
         def run_jobs(jobs: list[list[EpisodeKey]]) -> Iterator[list[dict[str, Any]]]:
@@ -133,14 +143,16 @@ def policy_video(profile: Profile, method_name: str, seed: int, out: Path) -> di
         raise ConfigError(f"--policy: {method_name!r} is scripted; use mor sim video --policy {method_name}")
     policies, tracker_factory, _ = load_method(profile, method)
     arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
-    return write_policy_video(out, profile.sim, SingleTracker(tracker_factory(1)), policies.pick, policies.drop,
-                              decider(method, policies, arena), has_uncertainty(method.variant), seed,
-                              horizon=profile.evaluate.horizon)
+    return write_policy_video(out, sim_of(method, profile.sim), SingleTracker(tracker_factory(1)), policies.pick,
+                              policies.drop, decider(method, policies, arena), has_uncertainty(method.variant), seed,
+                              horizon=profile.evaluate.horizon, encode=method_inputs(method))
 
 
 def collect_results(profile_name: str) -> Path:
     """Merge every row in ``cards/results/rows/`` (and each setting's, ``settings/*/cards/results/rows/``) of this
-    profile into ``cards/results/results.json`` and render the tables into ``cards/results/README.md``.
+    profile into ``cards/results/results.json``, render the tables into ``cards/results/README.md`` and the headline
+    table into the main workspace's README.md (its results block; a workspace without a README, such as a test's,
+    has none to fill).
 
     Each row gets the ``workspace`` it was evaluated in ("." or "settings/NAME"); ``localisation`` maps each
     workspace to the headline errors of the L-Net its rows observed through (for the card's shortfall notes)."""
@@ -160,6 +172,8 @@ def collect_results(profile_name: str) -> Path:
                "compute": update_compute(paths.RESULTS_CARD / "compute.json", profile_name)}
     write_json(path, results)
     write_results_card(results, paths.RESULTS_CARD)
+    if paths.README.is_file():
+        write_readme_results(paths.README, results, paths.RESULTS_CARD.as_posix())
     return path
 
 

@@ -121,6 +121,11 @@ def test_a_good_temp_file_loads(tmp_path: Path) -> None:
     assert profile.oracle.episodes == 4
 
 
+def test_an_integer_stands_for_a_float(tmp_path: Path) -> None:
+    profile = load_profile("tiny", write_params(tmp_path, _with("sim", "arena_size", 6)))
+    assert profile.sim.arena_size == 6.0 and isinstance(profile.sim.arena_size, float)
+
+
 def _with(section: str, key: str, value) -> str:
     document = yaml.safe_load(yaml.safe_dump(GOOD))
     document["profiles"]["tiny"].setdefault(section, {})[key] = value
@@ -138,6 +143,15 @@ def _with(section: str, key: str, value) -> str:
         ("sim", "texture_pool", "all", "sim.texture_pool"),
         ("oracle", "episodes", 0, "oracle.episodes"),
         ("oracle", "seeds", [], "oracle.seeds"),
+        ("oracle", "seeds", [1, 1], "oracle.seeds"),
+        ("evaluate", "seeds", [-1, 1], "evaluate.seeds.0"),
+        ("evaluate", "seeds", [0, 0], "evaluate.seeds: seeds must be distinct"),
+        ("evaluate", "episodes", True, "evaluate.episodes"),  # strict: a bool is not an int
+        ("collect", "episodes", 2.0, "collect.episodes"),
+        ("sim", "landmark", 1, "sim.landmark"),
+        ("sim", "n_objects", "3", "sim.n_objects"),
+        ("lnet", "train", {"max_steps": True}, "lnet.train.max_steps"),
+        ("policy", "pick", {"n_envs": False}, "policy.pick.n_envs"),
         ("oracle", "episode", 4, "oracle.episode"),  # typo of episodes
         ("demo", "task", "fly", "demo.task"),
         ("demo", "fps", 0, "demo.fps"),
@@ -304,10 +318,11 @@ def _numeric_options() -> list[tuple[str, str, Any]]:
 
 
 def _bad_cases() -> list[tuple[list[str], str]]:
-    """(arguments, what the error line must name): the issue's list, then for every numeric option a value
+    """(arguments, what the error line must name): a hand-picked list, then for every numeric option a value
     that is not a number and one below its bound, and an unknown option for every command."""
     cases = [
         (["sim", "oracle", "--seeds", "a,b"], "--seeds"), (["sim", "oracle", "--seeds", "1,-1"], "--seeds"),
+        (["sim", "oracle", "--seeds", "0,0"], "--seeds"),
         (["sim", "render", "--seed", "-1"], "--seed"), (["sim", "video", "--policy", "foo"], "--policy"),
         (["sim", "video", "--out", "v.avi"], "v.avi"), (["collect", "--episodes", "-5"], "--episodes"),
         (["collect", "--episodes", "0"], "--episodes"), (["collect", "--workers", "0"], "--workers"),

@@ -50,7 +50,7 @@ def test_oracle_writes_metrics_json(cli, tmp_path: Path) -> None:
         assert 0.0 <= summary["success"]["mean"] <= 1.0
     assert {"fixed_strict", "energy_remaining"} <= set(payload["tasks"]["rearrange"]["summary"])
     assert f"wrote {out}" in result.stdout
-    assert not list(out.parent.glob("*.partial"))
+    assert not list(out.parent.glob("*.partial*"))
 
 
 def test_oracle_single_task(cli, tmp_path: Path) -> None:

@@ -174,6 +174,9 @@ def test_baseline_stages_train_evaluate_and_fill_table_1(workspace: Path) -> Non
     _run("policy", "train", "--variant", "baseline_landmark", "--profile", "tiny")
     assert (workspace / "cards/policy/baseline_img/pick/policy.pth").is_file()
     assert not (workspace / "cards/policy/baseline_landmark/pick").exists()
+    for variant in ("baseline_img", "baseline_landmark"):  # `mor sim video --policy` offers every method
+        out = workspace / f"{variant}.gif"
+        assert f"wrote {out}" in _run("sim", "video", "--policy", variant, "--profile", "tiny", "--out", str(out))
     _run("eval", "run", "--method", "baseline_landmark", "--profile", "tiny")
     protocol = tiny["evaluate"]
     records = (workspace / "datasets/eval/baseline_landmark.jsonl").read_text().splitlines()

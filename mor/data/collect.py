@@ -63,9 +63,10 @@ def _leaves(params: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 class ProfileShape:
     """The data-shaping parameters a profile asks of every episode file, and names for one-line messages.
 
-    A simulated episode's data-shaping params are its recorded ``CollectionSpec.params()`` less ``seed`` (the seed
-    only names the files, so collections of several seeds may share a dataset); a real episode's are the image size
-    and frame rate it was resampled to. ``name`` is the profile's name ('' when unknown); ``others`` are
+    A collected episode's data-shaping params are its recorded ``CollectionSpec.params()`` less ``seed`` (the seed
+    only names the files, so collections of several seeds may share a dataset); an imported real run's, and a robot
+    controller's run (real or simulated, ``mor.robot``), are the image size and frame rate of its frames (its params'
+    ``import`` section). ``name`` is the profile's name ('' when unknown); ``others`` are
     (name, spec) of the named profiles, to suggest one that matches a file.
     """
 
@@ -82,7 +83,7 @@ class ProfileShape:
         params; else one line saying what differs and what to do."""
         recorded = json.loads(metadata.get("params") or "{}")
         asked = f"profile '{self.name}'" if self.name else "the active profile"
-        if metadata.get("source") == "sim":
+        if metadata.get("source") == "sim" and "import" not in recorded:
             got, want = _leaves(sim_data_params(recorded)), _leaves(self.data_params())
             verb = "collected"
             match = [name for name, spec in self.others if _leaves(sim_data_params(spec.params())) == got]

@@ -16,17 +16,16 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from mor.params_model import ParamsModel
 from mor.sim.arena import Arena
 from mor.sim.geometry import bearing
 from mor.sim.rules import Action, MotionNoise, WorldState, drop_free, drop_point, move_obstructed, pick_candidate
 
 
-class ExplorationParams(BaseModel):
+class ExplorationParams(ParamsModel):
     """Knobs of the random walk (steps are actions)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     mean_run_steps: float = Field(10.0, ge=1.0, description="mean MOVEs per run (geometric)")
     max_turn_steps: int = Field(9, ge=1, le=36, description="turns between runs ~ U{1..max} (9: at most 90 deg)")

@@ -25,6 +25,7 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 # lerobot warns on import that torchcodec is missing; image datasets never decode video, so say it once, not per shard.
 logging.getLogger("lerobot.utils.import_utils").setLevel(logging.ERROR)
 
+from mor.atomic import atomic_folder, remove_if_orphaned  # noqa: E402
 from mor.data.episode_io import EpisodeData, read_episode  # noqa: E402
 from mor.data.manifest import SPLITS  # noqa: E402
 from mor.data.observations import pad_classes  # noqa: E402
@@ -137,16 +138,6 @@ def scratch_prefix() -> str:
     return f"{SCRATCH_PREFIX}{os.getpid()}-"
 
 
-def _process_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's process
-        return True
-    return True
-
-
 def remove_stale_scratch(folders: tuple[Path | None, ...] | None = None) -> list[Path]:
     """Delete the scratch folders that builds killed mid-shard (kill -9) left behind; returns them.
 
@@ -159,12 +150,8 @@ def remove_stale_scratch(folders: tuple[Path | None, ...] | None = None) -> list
     removed = []
     for folder in {Path(f) for f in folders if f is not None}:
         for path in folder.glob(f"{SCRATCH_PREFIX}*"):
-            pid = path.name.removeprefix(SCRATCH_PREFIX).split("-", 1)[0]
-            with contextlib.suppress(OSError):  # gone meanwhile, or not ours to delete
-                if (pid.isdigit() and path.is_dir() and not path.is_symlink()
-                        and path.lstat().st_uid == os.getuid() and not _process_alive(int(pid))):
-                    shutil.rmtree(path)
-                    removed.append(path)
+            if remove_if_orphaned(path, path.name.removeprefix(SCRATCH_PREFIX).split("-", 1)[0]):
+                removed.append(path)
     return removed
 
 
@@ -173,12 +160,11 @@ def write_lerobot_dataset(
 ) -> Path:
     """Write ``episode_files`` as one LeRobot dataset at ``root``.
 
-    The dataset is written in a scratch folder (``scratch_dir``), copied next to ``root`` under a temporary name
-    and renamed, so ``root`` is either absent or whole.
+    The dataset is written in a scratch folder (``scratch_dir``), then published at ``root`` as a whole
+    (``atomic_folder``), so ``root`` is either absent or whole.
     """
     from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy import
 
-    partial = root.with_name(root.name + ".partial")
     with tempfile.TemporaryDirectory(prefix=scratch_prefix(), dir=scratch_dir()) as scratch:
         work = Path(scratch) / root.name
         dataset = LeRobotDataset.create(repo_id=repo_id, fps=int(round(fps)), root=work,
@@ -191,10 +177,8 @@ def write_lerobot_dataset(
                 dataset.save_episode()
             dataset.finalize()
         (work / BUILD_STAMP).write_text(json.dumps(stamp) + "\n")
-        shutil.rmtree(partial, ignore_errors=True)
-        shutil.copytree(work, partial)
-    shutil.rmtree(root, ignore_errors=True)
-    partial.replace(root)
+        with atomic_folder(root) as folder:
+            shutil.copytree(work, folder, dirs_exist_ok=True)
     return root
 
 
@@ -279,20 +263,16 @@ def build_splits(
     for split, jobs in jobs_by_split.items():
         split_root = out_root / split
         split_stamp = {"dataset_version": version, "split": split, "episodes": counts[split]}
-        partial = split_root.with_name(split + ".partial")
-        shutil.rmtree(partial, ignore_errors=True)
-        if jobs:
-            # One Parquet file per shard: concatenating image tables re-reads and rewrites the growing file for
-            # every shard (quadratic), while a new file per shard is linear and loads the same way.
-            with batched_image_embedding():
-                aggregate_datasets([f"mor/{split}-shard{job.index:03d}" for job in jobs], f"mor/{split}",
-                                   roots=[job.root for job in jobs], aggr_root=partial, concatenate_data=False)
-            sort_stats(partial)
-        else:
-            partial.mkdir(parents=True)
-        (partial / BUILD_STAMP).write_text(json.dumps(split_stamp) + "\n")
-        shutil.rmtree(split_root, ignore_errors=True)
-        partial.replace(split_root)
+        with atomic_folder(split_root) as folder:
+            if jobs:
+                folder.rmdir()  # lerobot makes the folder it aggregates into
+                # One Parquet file per shard: concatenating image tables re-reads and rewrites the growing file
+                # for every shard (quadratic), while a new file per shard is linear and loads the same way.
+                with batched_image_embedding():
+                    aggregate_datasets([f"mor/{split}-shard{job.index:03d}" for job in jobs], f"mor/{split}",
+                                       roots=[job.root for job in jobs], aggr_root=folder, concatenate_data=False)
+                sort_stats(folder)
+            (folder / BUILD_STAMP).write_text(json.dumps(split_stamp) + "\n")
         shutil.rmtree(shards_dir / split, ignore_errors=True)
     shutil.rmtree(shards_dir, ignore_errors=True)
     return counts

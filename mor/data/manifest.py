@@ -6,14 +6,15 @@ profile's data-shaping params (``ProfileShape.data_params``).
 
 A manifest lists only episodes that a build has read whole (every message decoded), and every one made with the
 profile's data-shaping params: ``build_manifest`` checks each file and refuses the lot (one line) when any is bad,
-so the pipeline writes the manifest only after the build has read every episode.
+so the pipeline writes the manifest only after the build has read every episode. A file keeps the bytes it was
+listed with (``changed_since_listed``): build and validation both refuse one that changed.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +23,7 @@ import pyarrow.parquet as pq
 
 from mor.atomic import atomic_output
 from mor.data.collect import ProfileShape
-from mor.data.episode_io import EpisodeFileError, read_metadata, verify_episode
+from mor.data.episode_io import REDO, EpisodeFileError, read_metadata, verify_episode
 from mor.data.parallel import ordered_map
 from mor.data.schema import DATASET_LAYOUT
 from mor.errors import MorError
@@ -75,40 +76,57 @@ class EpisodesRejected(MorError):
 VERIFIED_KEY = b"episodes_decoded"  # schema metadata of manifests whose every episode was decoded by a build
 
 
-def decoded_files(path: Path) -> dict[str, str]:
-    """{file: sha256} of a manifest at ``path`` written after its build decoded every episode ({} if there is
-    none, it cannot be read, or an older build wrote it without decoding)."""
+@dataclass(frozen=True)
+class ListedFiles:
+    """What a previous manifest says of its episode files: {file: sha256}, and whether the build that wrote it
+    decoded every one of them (only then may a later build skip decoding a file with the same sha256)."""
+
+    sha256: dict[str, str] = field(default_factory=dict)
+    decoded: bool = False
+
+
+def listed_files(path: Path) -> ListedFiles:
+    """The files the manifest at ``path`` lists (none if there is no manifest or it cannot be read)."""
     try:
         table = pq.read_table(path)
     except (OSError, pa.ArrowException):
-        return {}
-    if (table.schema.metadata or {}).get(VERIFIED_KEY) != b"1":
-        return {}
-    return dict(zip(table["file"].to_pylist(), table["sha256"].to_pylist(), strict=True))
+        return ListedFiles()
+    return ListedFiles(dict(zip(table["file"].to_pylist(), table["sha256"].to_pylist(), strict=True)),
+                       (table.schema.metadata or {}).get(VERIFIED_KEY) == b"1")
 
 
-def _inspect(job: tuple[Path, ProfileShape, str | None]) -> tuple[dict[str, str] | None, str, str | None]:
-    """(metadata, sha256, problem) of one episode file: decoded whole unless ``decoded_sha`` equals its sha256."""
-    path, shape, decoded_sha = job
+def changed_since_listed(path: Path, sha256: str, listed_sha256: str | None) -> str | None:
+    """The rule build and validation share: a file a manifest lists keeps the bytes it was listed with (a byte
+    flipped where no reader looks still changes them). None if it does (or is not listed), else one line."""
+    if listed_sha256 is None or sha256 == listed_sha256:
+        return None
+    return (f"{path}: its bytes changed since the build that listed it (sha256 differs from the manifest's); {REDO}"
+            f", or delete the manifest if it was re-made on purpose")
+
+
+def _inspect(job: tuple[Path, ProfileShape, str | None, bool]) -> tuple[dict[str, str] | None, str, str | None]:
+    """(metadata, sha256, problem) of one episode file: decoded whole unless a decoding build (``decoded``) listed it
+    with its sha256, then refused (as ``check_episode_file`` does) if it is listed with another sha256."""
+    path, shape, listed_sha, decoded = job
     sha = file_sha256(path)
     try:
-        metadata = read_metadata(path) if decoded_sha == sha else verify_episode(path)
+        metadata = read_metadata(path) if decoded and listed_sha == sha else verify_episode(path)
     except EpisodeFileError as error:
         return None, sha, str(error)
-    return metadata, sha, shape.mismatch(path, metadata)
+    return metadata, sha, changed_since_listed(path, sha, listed_sha) or shape.mismatch(path, metadata)
 
 
-def build_manifest(episode_files: list[Path], root: Path, shape: ProfileShape,
-                   decoded: Mapping[str, str] | None = None, workers: int = 1, progress: bool = False) -> pa.Table:
+def build_manifest(episode_files: list[Path], root: Path, shape: ProfileShape, listed: ListedFiles | None = None,
+                   workers: int = 1, progress: bool = False) -> pa.Table:
     """The manifest of ``episode_files`` (paths stored relative to ``root``), sorted by episode id.
 
-    Every file is decoded whole (``verify_episode``, in ``workers`` processes) unless ``decoded``
-    (``decoded_files`` of the previous manifest) lists it with the same sha256, and its params are compared with
-    ``shape``'s. Raises EpisodesRejected naming the bad files when any is unreadable or made with other
-    data-shaping params.
+    Every file is decoded whole (``verify_episode``, in ``workers`` processes) unless ``listed`` (``listed_files``
+    of the previous manifest, written by a decoding build) lists it with the same sha256; one it lists with another
+    sha256 is refused (``changed_since_listed``), and every file's params are compared with ``shape``'s. Raises
+    EpisodesRejected naming the bad files when any is unreadable, changed or made with other data-shaping params.
     """
-    decoded = decoded or {}
-    jobs = [(path, shape, decoded.get(str(path.relative_to(root)))) for path in episode_files]
+    listed = listed or ListedFiles()
+    jobs = [(path, shape, listed.sha256.get(str(path.relative_to(root))), listed.decoded) for path in episode_files]
     rows, problems, bad = [], [], []
     for path, (metadata, sha, problem) in zip(
             episode_files, ordered_map(_inspect, jobs, workers, "manifest", progress), strict=True):

@@ -33,8 +33,10 @@ of the first image and the first agent pose to t_end = the earlier of the last i
 - held: the latest ``/mor/held`` value at or before t_k (-1 before the first). Without a held topic it is inferred
   from the actions with the simulator's rule (PICK takes ``rules.pick_candidate``, DROP releases);
 - action (taken after frame k): the first non-idle action whose time falls in [t_k, t_{k+1}); when there is none,
-  with ``action_fill="executing"`` (default) the action still executing at t_k, i.e. the latest action before
-  t_k if it is not idle and at most ``action_hold_s`` old; otherwise -1 (``NO_ACTION``: the robot was idle).
+  -1 (``NO_ACTION``: the robot was idle) if an idle command (a zero Twist, NONE) falls in the window, else, with
+  ``action_fill="executing"`` (default), the action still executing at t_k, i.e. the latest action before t_k if
+  it is not idle and at most ``action_hold_s`` old. Then what the robot did (``executed_actions``, the rule the
+  robot controller's own episodes use too): a MOVE or a turn that the tracked pose does not show is -1.
   The last frame's action is -1, as in simulated episodes. With cmd_vel only, changes of the held topic add
   PICK (-1 -> i) and DROP (i -> -1) actions at the time of the change.
 
@@ -56,12 +58,13 @@ import numpy as np
 from mcap.reader import McapReader, make_reader
 from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 from PIL import Image, UnidentifiedImageError
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
+from pydantic import Field, ValidationError, ValidationInfo, field_validator
 
 from mor.data.episode_io import EpisodeHeader, EpisodeWriter, encode_png
 from mor.data.manifest import file_sha256
 from mor.data.schema import MAX_OBJECTS, NO_ACTION
 from mor.errors import ConfigError, MorError
+from mor.params_model import ParamsModel
 from mor.sim.catalog import N_CLASSES
 from mor.sim.config import format_validation_error
 from mor.sim.rules import Action, WorldState, pick_candidate
@@ -78,11 +81,11 @@ TOPIC_FLAGS: dict[str, str] = {
 }
 
 # Message types, without the "/msg/" part (rosbag2 writes "pkg/msg/Name"; older tools "pkg/Name").
-_IMAGE_TYPES = ("sensor_msgs/CompressedImage", "sensor_msgs/Image")
+IMAGE_TYPES = ("sensor_msgs/CompressedImage", "sensor_msgs/Image")
 _POSE_TYPES = ("geometry_msgs/PoseStamped", "geometry_msgs/Pose", "geometry_msgs/PoseWithCovarianceStamped",
                "nav_msgs/Odometry")
-_INT_TYPES = tuple(f"std_msgs/{kind}{bits}" for kind in ("Int", "UInt") for bits in (8, 16, 32, 64))
-_ACTION_TYPES = ("std_msgs/String", *_INT_TYPES)
+INT_TYPES = tuple(f"std_msgs/{kind}{bits}" for kind in ("Int", "UInt") for bits in (8, 16, 32, 64))
+_ACTION_TYPES = ("std_msgs/String", *INT_TYPES)
 _TWIST_TYPES = ("geometry_msgs/Twist", "geometry_msgs/TwistStamped")
 _RAW_ENCODINGS = {"rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4, "mono8": 1}
 
@@ -98,10 +101,8 @@ class RealBagError(MorError, ValueError):
     """A recording that cannot be imported; the message names the bag, the topic and what to do."""
 
 
-class RealTopics(BaseModel):
+class RealTopics(ParamsModel):
     """Which topics of the recording hold what (message types in the module docstring)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     image: str = Field("/camera/image_raw/compressed", min_length=1, description="first-person camera")
     agent_pose: str = Field("/tracker/robot_pose", min_length=1, description="robot pose from the top-down tracker")
@@ -126,10 +127,8 @@ class RealTopics(BaseModel):
         return [self.object_pose.format(i=i) for i in range(n_objects)]
 
 
-class ImportParams(BaseModel):
+class ImportParams(ParamsModel):
     """What the recording does not say: the objects, their targets, and how to resample. Metres, seconds."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     n_objects: int = Field(3, ge=1, le=MAX_OBJECTS, description="objects in the run (paper: 3)")
     object_classes: list[int] = Field(description="class id of each object, in object order")
@@ -227,8 +226,9 @@ class _Series:
         return times[order], [self.values[i] for i in order]
 
 
-class _Bag:
-    """One opened recording: the file, its topics (type, message count), and the errors it raises."""
+class RosBag:
+    """One opened rosbag2 MCAP recording: the file, its topics (type, message count), its decoded messages, and the
+    one-line errors it raises (``RealBagError``). Close it (or use it as a context manager)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
@@ -249,6 +249,12 @@ class _Bag:
 
     def close(self) -> None:
         self._stream.close()
+
+    def __enter__(self) -> RosBag:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     def error(self, text: str) -> RealBagError:
         return RealBagError(_one_line(f"{self.path}: {text}"))
@@ -282,9 +288,9 @@ class _Bag:
         names = sorted(t for t, (kind, n) in self.topics.items() if n > 0 and _base_type(kind) in kinds)
         return ", ".join(names[:8]) + (f" (+{len(names) - 8} more)" if len(names) > 8 else "")
 
-    def require(self, topic: str, what: str, field_name: str, kinds: tuple[str, ...]) -> str:
-        """The base type of ``topic``; raises a one-line error when it is absent, empty or of another type."""
-        flag = TOPIC_FLAGS[field_name]
+    def require(self, topic: str, what: str, flag: str, kinds: tuple[str, ...]) -> str:
+        """The base type of ``topic``; raises a one-line error when it is absent, empty or of another type (naming
+        ``flag``, the option or parameter that sets the topic)."""
         found = self.candidates(kinds)
         hint = (f"pass {flag} with one of: {found}" if found else
                 f"the bag has no {what} topic with messages of type {_type_names(kinds)}; record one or pass {flag}")
@@ -308,7 +314,7 @@ class _Bag:
             raise self.corrupt(error) from None
 
 
-def _resolve_bag(bag: Path) -> Path:
+def resolve_bag(bag: Path) -> Path:
     """The MCAP file of ``bag``: the file itself, or the single ``*.mcap`` in a rosbag2 directory."""
     bag = Path(bag)
     if bag.is_dir():
@@ -342,7 +348,7 @@ def _pose_of(message: Any, kind: str) -> Any:
     return message.pose.pose  # PoseWithCovarianceStamped, Odometry
 
 
-def _decode_image(message: Any, kind: str) -> np.ndarray:
+def decode_image(message: Any, kind: str) -> np.ndarray:
     """(H, W, 3) uint8 RGB; raises ValueError when the image cannot be decoded."""
     if kind == "sensor_msgs/CompressedImage":
         if "compresseddepth" in str(message.format).lower():
@@ -383,7 +389,7 @@ class _Recording:
     sources: dict[str, Any]
 
 
-def _action_value(bag: _Bag, topic: str, kind: str, message: Any, number: int) -> int:
+def _action_value(bag: RosBag, topic: str, kind: str, message: Any, number: int) -> int:
     data = message.data
     if kind == "std_msgs/String":
         value = _ACTION_NAMES.get(str(data).strip().upper().replace(" ", "_").replace("-", "_"))
@@ -408,20 +414,21 @@ def _twist_value(message: Any, kind: str, params: ImportParams) -> int:
     return NO_ACTION
 
 
-def _read(bag: _Bag, topics: RealTopics, params: ImportParams) -> _Recording:
+def _read(bag: RosBag, topics: RealTopics, params: ImportParams) -> _Recording:
     """Check the topics and read every non-image message (and the image times)."""
-    image_kind = bag.require(topics.image, "image", "image", _IMAGE_TYPES)
-    pose_kind = bag.require(topics.agent_pose, "agent pose", "agent_pose", _POSE_TYPES)
+    image_kind = bag.require(topics.image, "image", TOPIC_FLAGS["image"], IMAGE_TYPES)
+    pose_kind = bag.require(topics.agent_pose, "agent pose", TOPIC_FLAGS["agent_pose"], _POSE_TYPES)
     object_topics = topics.object_topics(params.n_objects)
-    object_kinds = [bag.require(t, f"object {i} pose", "object_pose", _POSE_TYPES) for i, t in enumerate(object_topics)]
+    object_kinds = [bag.require(t, f"object {i} pose", TOPIC_FLAGS["object_pose"], _POSE_TYPES)
+                    for i, t in enumerate(object_topics)]
     if bag.has(topics.action):
         assert topics.action is not None
         action_source, action_topic = "action", topics.action
-        action_kind = bag.require(action_topic, "action", "action", _ACTION_TYPES)
+        action_kind = bag.require(action_topic, "action", TOPIC_FLAGS["action"], _ACTION_TYPES)
     elif bag.has(topics.cmd_vel):
         assert topics.cmd_vel is not None
         action_source, action_topic = "cmd_vel", topics.cmd_vel
-        action_kind = bag.require(action_topic, "velocity command", "cmd_vel", _TWIST_TYPES)
+        action_kind = bag.require(action_topic, "velocity command", TOPIC_FLAGS["cmd_vel"], _TWIST_TYPES)
     else:
         offers = [(TOPIC_FLAGS["action"], bag.candidates(_ACTION_TYPES)),
                   (TOPIC_FLAGS["cmd_vel"], bag.candidates(_TWIST_TYPES))]
@@ -432,7 +439,7 @@ def _read(bag: _Bag, topics: RealTopics, params: ImportParams) -> _Recording:
                         f"messages; {'pass ' + found if found else record}")
     held_topic = topics.held if bag.has(topics.held) else None
     if held_topic:
-        bag.require(held_topic, "held object", "held", _INT_TYPES)
+        bag.require(held_topic, "held object", TOPIC_FLAGS["held"], INT_TYPES)
 
     images, poses, actions, held = _Series(), _Series(), _Series(), _Series()
     objects = [_Series() for _ in object_topics]
@@ -510,6 +517,8 @@ def _latest(times: np.ndarray, at: np.ndarray) -> np.ndarray:
 
 
 def _frame_actions(recording: _Recording, frame_times: np.ndarray, params: ImportParams) -> np.ndarray:
+    """The command in force over each frame's window [t_k, t_k+1): the first non-idle one that starts in it; else
+    idle when a stop (a zero Twist, NONE) comes in it; else (``action_fill="executing"``) the one still executing."""
     times, values = recording.action_times, recording.actions
     hold_ns = int(round(params.action_hold_s * 1e9))
     actions = np.full(len(frame_times), NO_ACTION, np.int64)
@@ -519,10 +528,38 @@ def _frame_actions(recording: _Recording, frame_times: np.ndarray, params: Impor
         started = window[window >= 0]
         if len(started):
             actions[k] = started[0]
-        elif (params.action_fill == "executing" and lo > 0 and values[lo - 1] >= 0
+        elif (len(window) == 0 and params.action_fill == "executing" and lo > 0 and values[lo - 1] >= 0
               and frame_times[k] - times[lo - 1] <= hold_ns):
             actions[k] = values[lo - 1]
     return actions
+
+
+#: What counts as motion of the tracked pose between two frames (``executed_actions``): metres, radians.
+MOTION_MIN_M: float = 0.005
+MOTION_MIN_RAD: float = float(np.deg2rad(0.5))
+
+
+def executed_actions(commands: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """What the robot did after each frame: the one rule of ``import_rosbag`` and of the robot controller's own
+    episodes (``mor.robot.recording``).
+
+    commands (T,): the action in force from frame t to frame t + 1 (-1 NO_ACTION: none, or a stop); poses (T, 3)
+    the tracked [x m, y m, theta rad] of each frame. A MOVE whose position moved less than ``MOTION_MIN_M``, or a
+    turn whose heading changed less than ``MOTION_MIN_RAD``, is no action (-1): the robot did not do it. PICK and
+    DROP are kept (they move nothing). The last frame's action is -1. Returns (T,) int64.
+    """
+    commands = np.asarray(commands, np.int64)
+    poses = np.asarray(poses, np.float64).reshape(-1, 3)
+    executed = np.full(len(commands), NO_ACTION, np.int64)
+    if len(commands) < 2:
+        return executed
+    moved = np.linalg.norm(np.diff(poses[:, :2], axis=0), axis=1)
+    turned = np.abs(np.angle(np.exp(1j * np.diff(poses[:, 2]))))
+    now = commands[:-1]
+    did = np.where(now == Action.MOVE, moved >= MOTION_MIN_M,
+                   np.where(np.isin(now, (Action.TURN_LEFT, Action.TURN_RIGHT)), turned >= MOTION_MIN_RAD, now >= 0))
+    executed[:-1] = np.where(did, now, NO_ACTION)
+    return executed
 
 
 def _max_gap_s(times: np.ndarray, start: int, end: int) -> float:
@@ -531,7 +568,7 @@ def _max_gap_s(times: np.ndarray, start: int, end: int) -> float:
     return round(float(np.max(np.diff(edges))) / 1e9, 6)
 
 
-def _resample(bag: _Bag, recording: _Recording, topics: RealTopics, params: ImportParams) -> dict[str, Any]:
+def _resample(bag: RosBag, recording: _Recording, topics: RealTopics, params: ImportParams) -> dict[str, Any]:
     r = recording
     start = int(max(r.image_times[0], r.pose_times[0]))
     end = int(min(r.image_times[-1], r.pose_times[-1]))
@@ -555,7 +592,7 @@ def _resample(bag: _Bag, recording: _Recording, topics: RealTopics, params: Impo
 
     objects = np.stack([xy[np.maximum(_latest(t, frame_times), 0)] for t, xy in zip(r.object_times, r.object_xy,
                                                                                         strict=True)], axis=1)
-    actions = _frame_actions(r, frame_times, params)
+    actions = executed_actions(_frame_actions(r, frame_times, params), poses)
     if r.held_times is not None and r.held is not None:
         index = _latest(r.held_times, frame_times)
         held = np.where(index >= 0, r.held[np.maximum(index, 0)], -1).astype(np.int64)
@@ -583,14 +620,14 @@ def _resample(bag: _Bag, recording: _Recording, topics: RealTopics, params: Impo
     }
 
 
-def _images(bag: _Bag, topic: str, kind: str, ordinals: set[int], size: int) -> dict[int, bytes]:
+def _images(bag: RosBag, topic: str, kind: str, ordinals: set[int], size: int) -> dict[int, bytes]:
     """PNG bytes of the images with the given ordinals (their order on ``topic``), cropped and resized."""
     pngs: dict[int, bytes] = {}
     last = max(ordinals)
     for ordinal, (_, _, message) in enumerate(bag.messages([topic])):
         if ordinal in ordinals:
             try:
-                image = _decode_image(message, kind)
+                image = decode_image(message, kind)
             except ValueError as error:
                 raise bag.error(f"image {ordinal + 1} on '{topic}' cannot be decoded ({error}); re-record the "
                                 "camera as jpeg or png CompressedImage, or pass --image-topic") from None
@@ -608,8 +645,8 @@ def episode_path(out_dir: Path, bag: Path, params: ImportParams) -> Path:
 def import_rosbag(bag: Path, out_dir: Path, topics: RealTopics, params: ImportParams) -> Path:
     """Convert one rosbag2 MCAP recording (a file, or a rosbag2 directory holding one) into one episode MCAP in
     ``out_dir``; returns its path. Raises ``RealBagError`` (one line naming the bag and the topic) on bad input."""
-    source = _resolve_bag(Path(bag))
-    opened = _Bag(source)
+    source = resolve_bag(Path(bag))
+    opened = RosBag(source)
     try:
         recording = _read(opened, topics, params)
         frames = _resample(opened, recording, topics, params)
@@ -628,6 +665,8 @@ def import_rosbag(bag: Path, out_dir: Path, topics: RealTopics, params: ImportPa
                 "sources": recording.sources, "quality": frames["quality"]},
     )
     actions = frames["actions"]
+    if path.exists():
+        logger.warning("%s: replacing the existing episode %s", source, path)
     with EpisodeWriter(path, header) as writer:
         for k, ordinal in enumerate(frames["image_ordinals"].tolist()):
             writer.add_frame(pngs[ordinal], frames["poses"][k], frames["objects"][k], int(frames["held"][k]),
@@ -637,5 +676,6 @@ def import_rosbag(bag: Path, out_dir: Path, topics: RealTopics, params: ImportPa
     return path
 
 
-__all__ = ["TOPIC_FLAGS", "ImportParams", "RealBagError", "RealTopics", "center_crop_resize", "episode_path",
-           "import_rosbag", "make_import_params", "make_real_topics", "quaternion_yaw"]
+__all__ = ["IMAGE_TYPES", "INT_TYPES", "MOTION_MIN_M", "MOTION_MIN_RAD", "TOPIC_FLAGS", "ImportParams", "RealBagError",
+           "RealTopics", "RosBag", "center_crop_resize", "decode_image", "episode_path", "executed_actions",
+           "import_rosbag", "make_import_params", "make_real_topics", "quaternion_yaw", "resolve_bag"]

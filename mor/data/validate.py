@@ -15,7 +15,7 @@ from typing import Any
 
 from mor.data.collect import ProfileShape
 from mor.data.episode_io import REDO, EpisodeFileError, verify_episode
-from mor.data.manifest import SPLITS, file_sha256
+from mor.data.manifest import SPLITS, changed_since_listed, file_sha256
 from mor.data.parallel import ordered_map
 
 
@@ -51,9 +51,7 @@ def check_episode_file(path: Path, shape: ProfileShape, expected_sha256: str | N
     frames = int(metadata["n_frames"])
     if expected_frames is not None and frames != expected_frames:
         return f"{path}: {frames} frames but the manifest says {expected_frames}; {REDO}"
-    if expected_sha256 is not None and file_sha256(path) != expected_sha256:
-        return f"{path}: sha256 differs from the manifest (file changed after build); rebuild or re-collect it"
-    return shape.mismatch(path, metadata)
+    return changed_since_listed(path, file_sha256(path), expected_sha256) or shape.mismatch(path, metadata)
 
 
 def check_split(root: Path, split: str, episodes: int, frames: int) -> tuple[dict[str, int], str | None]:

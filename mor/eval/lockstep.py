@@ -15,30 +15,15 @@ import numpy as np
 
 from mor.policy.belief import PoseBelief
 from mor.policy.envs import make_task_env
-from mor.policy.features import observation_vector
+from mor.policy.features import Encode
 from mor.policy.names import Task
 from mor.policy.hierarchy import Skill, SkillChain, skill_mask
 from mor.policy.observations import BatchTracker, task_goal
-from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
 
 #: (beliefs of k envs, held (k,), targets (k, n, 2), last (k,): the object of each env's previous decision, -1
 #: before the first) -> the object each should rearrange next (k,)
 Decide = Callable[[PoseBelief, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
-#: (skill task, the k envs' MOR observations, their infos, their beliefs, goals (k, ...), arena) -> the skill's
-#: batched input: the pose policies' vectors (k, D) (``pose_inputs``) or a baseline's dict of (k, ...) arrays
-Encode = Callable[[Task, list[dict[str, Any]], list[dict[str, Any]], PoseBelief, np.ndarray, Arena],
-                  np.ndarray | dict[str, np.ndarray]]
-
-
-def pose_inputs(uncertainty: bool) -> Encode:
-    """The pose policies' encoding: ``observation_vector`` of the beliefs (with or without their uncertainty)."""
-    def encode(task: Task, observations: list[dict[str, Any]], infos: list[dict[str, Any]], belief: PoseBelief,
-               goals: np.ndarray, arena: Arena) -> np.ndarray:
-        held = np.array([o["held"] for o in observations])
-        return observation_vector(belief, held, task, goals, uncertainty, arena)
-
-    return encode
 EpisodeKey = tuple[Any, ...]
 
 

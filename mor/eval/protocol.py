@@ -1,5 +1,5 @@
 """The evaluation protocol: every method plays the same episodes (seed s, episode e -> reset seed
-``episode_seed(s, e)``) of Pick, Drop and the full Rearrange task; one JSON line per episode.
+``episode_seed(s, e)``) of Pick, Drop and the full Rearrange task; one JSON line per episode (``mor.eval.records``).
 
 Pick and Drop are scored on their own tasks with the method's pick and drop policies (paper Table 1's
 "Pick"/"Drop" columns); Rearrange with the whole hierarchy (Success, %FS, %E).
@@ -16,24 +16,19 @@ import numpy as np
 from tqdm import tqdm
 
 from mor.atomic import atomic_output
-from mor.errors import ConfigError
-from mor.eval.lockstep import Decide, Encode, play_lockstep, pose_inputs
+from mor.eval.lockstep import Decide, play_lockstep
 from mor.eval.methods import MethodSpec, TrainedPolicies
+from mor.eval.records import EVAL_TASKS, METRICS, claim_records, read_records, seal
 from mor.eval.stats import summarize
 from mor.policy.belief import PoseBelief
 from mor.policy.baselines import baseline_inputs
 from mor.policy.envs import baseline_sim, make_task_env
-from mor.policy.features import observation_vector
+from mor.policy.features import Encode, observation_vector, pose_inputs
 from mor.policy.hierarchy import decision_mask, nearest_unfixed
 from mor.policy.observations import BatchTracker, has_uncertainty
 from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
 from mor.sim.rollout import episode_seed, make_policy, run_episode
-
-EVAL_TASKS = ("pick", "drop", "rearrange")
-METRICS = {"pick_success": ("pick", "success"), "drop_success": ("drop", "success"),
-           "rearrange_success": ("rearrange", "success"), "fixed_strict": ("rearrange", "fixed_strict"),
-           "energy_remaining": ("rearrange", "energy_remaining")}
 
 
 def decider(method: MethodSpec, policies: TrainedPolicies, arena: Arena) -> Decide:
@@ -124,9 +119,11 @@ def run_protocol(
     In this process (``play_records`` with ``policies`` and ``tracker_factory``), or, with ``run_jobs``, by
     whatever runs the ``protocol_jobs`` (``pipelines.evaluate``: worker processes or Ray tasks).
     played_by: what plays the episodes (e.g. the policies' digests and the L-Net's identity), stored beside the
-    records (``played_by_path``); records played by anything else are not resumed: one clear error.
+    records and sealed into each (``mor.eval.records``); records played by anything else are not resumed: one
+    clear error.
     """
-    claim_records(records_path, played_by or {})
+    played_by = played_by or {}
+    claim_records(records_path, played_by)
     done = {(r["task"], r["seed"], r["episode"]): r for r in read_records(records_path)}
     todo = [key for key in episode_keys(seeds, episodes) if key not in done]
     with atomic_output(records_path) as partial:  # drop a line cut short by a kill before appending
@@ -140,6 +137,7 @@ def run_protocol(
                                                 disable=not progress, dynamic_ncols=True) as bar:
         for records in run_jobs(protocol_jobs(todo)) if todo else ():
             for record in records:
+                record = seal(record, played_by)
                 handle.write(json.dumps(record) + "\n")
                 done[(record["task"], record["seed"], record["episode"])] = record
             handle.flush()
@@ -162,36 +160,6 @@ def _play(method: MethodSpec, sim: SimConfig, todo: list[tuple[str, int, int]], 
         decide = decider(method, policies, Arena.build(sim.arena, sim.arena_size))
         yield from play_lockstep(task, keys, sim_of(method, sim), tracker_factory(n), skills, decide,
                                  method_inputs(method), n, **env_kwargs)
-
-
-def played_by_path(records_path: Path) -> Path:
-    """Where ``run_protocol`` stores what played the records at ``records_path``: ``<name>.played_by.json``."""
-    return records_path.with_name(f"{records_path.stem}.played_by.json")
-
-
-def claim_records(records_path: Path, played_by: dict[str, Any]) -> None:
-    """Record that ``played_by`` plays the episodes of ``records_path``; ConfigError naming both sides if records
-    there were played by something else (or by something unrecorded), since resuming would mix the two."""
-    sidecar = played_by_path(records_path)
-    stated = json.loads(sidecar.read_text()) if sidecar.is_file() else None
-    if read_records(records_path) and stated != played_by:
-        raise ConfigError(f"{records_path}: its records were played by {stated} but this run plays {played_by}; "
-                          f"remove it and {sidecar.name} to evaluate anew")
-    with atomic_output(sidecar) as partial:
-        partial.write_text(json.dumps(played_by, indent=2, sort_keys=True) + "\n")
-
-
-def read_records(path: Path) -> list[dict[str, Any]]:
-    """The per-episode records of ``path``; a line cut short by a kill is dropped (it is played again)."""
-    if not path.is_file():
-        return []
-    records = []
-    for line in path.read_text().splitlines():
-        try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue
-    return records
 
 
 def metric_summaries(records: list[dict[str, Any]], resamples: int) -> dict[str, dict]:

@@ -10,6 +10,7 @@ import numpy as np
 from mor.eval.lockstep import Decide
 from mor.lnet.figures import write_estimate_gif
 from mor.policy.envs import make_task_env
+from mor.policy.features import Encode
 from mor.policy.hierarchy import HierarchicalRearrange, Skill
 from mor.policy.observations import Tracker
 from mor.sim.config import SimConfig
@@ -22,11 +23,14 @@ def _tril(covariance: np.ndarray) -> np.ndarray:
 
 
 def write_policy_video(path: Path, sim: SimConfig, tracker: Tracker, pick: Skill, drop: Skill, decide: Decide,
-                       uncertainty: bool, seed: int, fps: int = 8, horizon: int | None = None) -> dict[str, float]:
-    """Play one ``MOR/Rearrange-v0`` episode (reset seed ``seed``; ``horizon`` caps its steps) with the hierarchy
-    and write it to ``path`` (.mp4 or .gif); returns the episode's metrics."""
+                       uncertainty: bool, seed: int, fps: int = 8, horizon: int | None = None,
+                       encode: Encode | None = None) -> dict[str, float]:
+    """Play one ``MOR/Rearrange-v0`` episode (reset seed ``seed``; ``horizon`` caps its steps) with the hierarchy,
+    its skills fed by ``encode`` (``HierarchicalRearrange``), and write it to ``path`` (.mp4 or .gif); returns the
+    episode's metrics."""
     env_kwargs = {} if horizon is None else {"horizon": horizon}
-    env = HierarchicalRearrange(make_task_env("decision", sim, True, **env_kwargs), tracker, pick, drop, uncertainty)
+    env = HierarchicalRearrange(make_task_env("decision", sim, True, **env_kwargs), tracker, pick, drop, uncertainty,
+                                encode)
     frames: dict[str, list] = {name: [] for name in ("images", "poses", "objects", "agent_mean", "agent_tril",
                                                      "heading", "kappa", "object_mean", "object_tril")}
 

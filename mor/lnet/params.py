@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
+
+from mor.params_model import ParamsModel
 
 
-class LNetConfig(BaseModel):
+class LNetConfig(ParamsModel):
     """Architecture. ``encoder``: ``compact`` (CPU profiles) or ``resnet18`` (the paper's, trained from scratch)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     encoder: Literal["compact", "resnet18"] = "compact"
     feature_dim: int = Field(256, ge=8)
@@ -38,10 +38,8 @@ class LNetConfig(BaseModel):
                            "mean on visible objects is 0.05 at a 15% base rate), so the filter ignores the images")
 
 
-class TrainParams(BaseModel):
+class TrainParams(ParamsModel):
     """Every hyper-parameter of a training run."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     window: int = Field(32, ge=2, description="frames per training sequence")
     stride: int = Field(16, ge=1, description="frames between window starts")
@@ -64,13 +62,11 @@ class TrainParams(BaseModel):
         "float32", description="the image encoder's arithmetic while training (torch.autocast around the encoder "
         "only; weights, optimizer, heads and tracker stay float32); mor ablate-lnet --study training_precision "
         "compares the two at an equal budget")
-    seed: int = 0
+    seed: int = Field(0, ge=0)
 
 
-class CalibrationParams(BaseModel):
+class CalibrationParams(ParamsModel):
     """Fitting the uncertainty scales on the validation split."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     max_episodes: int = Field(200, ge=1, description="validation episodes used to fit the scales")
     criterion: Literal["nll", "coverage"] = Field(
@@ -81,10 +77,8 @@ class CalibrationParams(BaseModel):
         "anywhere in the arena: mor.lnet.lost); calibrate-lnet reports every criterion with and without")
 
 
-class LNetParams(BaseModel):
+class LNetParams(ParamsModel):
     """Everything the L-Net stages read from a profile."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     model: LNetConfig = Field(default_factory=LNetConfig)
     train: TrainParams = Field(default_factory=TrainParams)
@@ -115,7 +109,7 @@ class LNetParams(BaseModel):
 ABLATIONS: dict[str, dict[str, dict[str, object]]] = {
     "actions": {"with_actions": {"use_actions": True}, "without_actions": {"use_actions": False}},
     "object_head": {"global": {"object_head": "global"}, "attention": {"object_head": "attention"}},
-    # Issue 10: which tracker, and whether the visibility head and the visible-only ego loss earn their place.
+    # Which tracker, and whether the visibility head and the visible-only ego loss earn their place.
     # A key of TrainParams (beta_nll) overrides the training parameters instead.
     "tracker": {
         "lstm": {"tracker": "lstm", "visibility": False},
@@ -124,7 +118,7 @@ ABLATIONS: dict[str, dict[str, dict[str, object]]] = {
         "filter_visibility": {"tracker": "filter", "visibility": True},
         "filter_visibility_beta": {"tracker": "filter", "visibility": True, "beta_nll": 0.5},
     },
-    # Issue 10's training budget: the same model trained with its encoder in float32 or in bfloat16 (TrainParams).
+    # The default training budget: the same model trained with its encoder in float32 or in bfloat16 (TrainParams).
     "training_precision": {"float32": {"encoder_precision": "float32"},
                            "bfloat16": {"encoder_precision": "bfloat16"}},
 }

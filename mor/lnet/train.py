@@ -17,6 +17,7 @@ import torch
 from torch.utils.data import DataLoader, Subset
 from tqdm import tqdm
 
+from mor.atomic import atomic_output
 from mor.data.sequences import SequenceWindows
 from mor.lnet.checkpoint import load_checkpoint, save_checkpoint, signature
 from mor.lnet.loss import lnet_loss, posenet_loss, previous_actions
@@ -169,5 +170,6 @@ def train(config: LNetConfig, params: TrainParams, train_root: Path, validation_
                "train_windows": len(train_set), "device": str(device), "dataset_version": dataset_version,
                "image_size": train_set.image_size, "seconds": time.perf_counter() - start,
                "torch_threads": torch.get_num_threads(), "encoder_precision": params.encoder_precision}
-    (out_dir / "train_summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    with atomic_output(out_dir / "train_summary.json") as partial:
+        partial.write_text(json.dumps(summary, indent=2) + "\n")
     return summary

@@ -34,7 +34,7 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, NatureC
 
 from mor.lnet.model import build_encoder
 
-from mor.policy.names import PICK_FROM, BaselineVariant, Task
+from mor.policy.names import BaselineVariant, Task
 from mor.sim.catalog import N_CLASSES
 from mor.sim.geometry import bearing
 from mor.sim.tasks import DropEnv, PickEnv
@@ -43,11 +43,6 @@ BaselineInput = Literal["img", "delta_pose", "landmark"]
 BaselineEncoder = Literal["nature_cnn", "compact", "resnet18", "resnet50"]
 BASELINE_INPUTS: dict[BaselineVariant, BaselineInput] = {
     "baseline_img": "img", "baseline_delta_pose": "delta_pose", "baseline_landmark": "landmark"}
-
-
-def baseline_tasks(variant: BaselineVariant) -> tuple[Task, ...]:
-    """The skills a baseline variant trains itself: all but ``baseline_img`` reuse its Pick."""
-    return ("pick", "drop") if variant == PICK_FROM else ("drop",)
 
 
 def baseline_space(task: Task, input_kind: BaselineInput, image_shape: tuple[int, int, int], arena_half: float
@@ -86,7 +81,7 @@ def baseline_observation(task: Task, input_kind: BaselineInput, observation: dic
 
 
 def baseline_inputs(variant: BaselineVariant) -> Callable[..., dict[str, np.ndarray]]:
-    """The evaluation's encoding of k envs for a baseline's skills (``mor.eval.lockstep.Encode``): their
+    """The evaluation's encoding of k envs for a baseline's skills (``mor.policy.features.Encode``): their
     ``baseline_observation``s stacked; the beliefs are not read (a baseline sees pixels and its goal only)."""
     input_kind = BASELINE_INPUTS[variant]
 
@@ -103,11 +98,13 @@ def stack_observations(observations: list[dict[str, np.ndarray]]) -> dict[str, n
     return {key: np.stack([o[key] for o in observations]) for key in observations[0]}
 
 
-class BaselineObservation(gym.ObservationWrapper):
+class BaselineObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     """A rendered MOR Pick or Drop env seen as a baseline does (``baseline_space``); ``action_masks()`` is the
-    env's. The true agent pose for ``delta_pose`` comes from the env's ``info`` of the same step."""
+    env's. The true agent pose for ``delta_pose`` comes from the env's ``info`` of the same step; the constructor's
+    arguments are recorded in ``spec`` (``spec.make()`` builds it again)."""
 
     def __init__(self, env: gym.Env, input_kind: BaselineInput) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, input_kind=input_kind)
         super().__init__(env)
         base = env.unwrapped
         if not isinstance(base, PickEnv | DropEnv) or not base.render_frames:

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 import gymnasium as gym
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 
+from mor.errors import ConfigError
 from mor.policy.hierarchy import HierarchicalRearrange, Skill
 from mor.policy.names import BaselineVariant, Task, Variant
 from mor.policy.observations import GroundTruthTracker, PoseObservation, Tracker, has_uncertainty
@@ -20,7 +21,11 @@ ENV_IDS: dict[Task, str] = {"pick": "MOR/Pick-v0", "drop": "MOR/Drop-v0", "decis
 
 
 def make_task_env(task: Task, sim: SimConfig, render_frames: bool, **kwargs: object) -> gym.Env:
-    """The MOR environment of ``task`` (decision: the full task), with or without first-person frames."""
+    """The MOR environment of ``task`` (decision: the full task), with or without first-person frames; ConfigError
+    naming the policy tasks for any other ``task``."""
+    if task not in ENV_IDS:
+        raise ConfigError(f"task: {task!r} is not a policy's task; choose one of {', '.join(ENV_IDS)} "
+                          f"(decision plays the full rearrangement)")
     return gym.make(ENV_IDS[task], render_frames=render_frames, **sim.model_dump(), **kwargs).unwrapped
 
 

@@ -21,6 +21,9 @@ but without them PPO does not learn Pick (docs/assumptions.md, "Policies").
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -114,3 +117,20 @@ def observation_vector(
         if task == "pick":
             parts.append(objects[rows, np.asarray(goal, int).reshape(n_envs)])
     return np.concatenate([np.asarray(p, np.float32).reshape(n_envs, -1) for p in parts], -1)
+
+
+#: (skill task, the k envs' MOR observations, their infos, their beliefs, goals (k, ...), arena) -> the skill's
+#: batched input: the pose policies' vectors (k, D) (``pose_inputs``) or a baseline's dict of (k, ...) arrays
+#: (``mor.policy.baselines.baseline_inputs``)
+Encode = Callable[[Task, list[dict[str, Any]], list[dict[str, Any]], PoseBelief, np.ndarray, Arena],
+                  np.ndarray | dict[str, np.ndarray]]
+
+
+def pose_inputs(uncertainty: bool) -> Encode:
+    """The pose policies' encoding: ``observation_vector`` of the beliefs (with or without their uncertainty)."""
+    def encode(task: Task, observations: list[dict[str, Any]], infos: list[dict[str, Any]], belief: PoseBelief,
+               goals: np.ndarray, arena: Arena) -> np.ndarray:
+        held = np.array([o["held"] for o in observations])
+        return observation_vector(belief, held, task, goals, uncertainty, arena)
+
+    return encode

@@ -21,7 +21,7 @@ import torch
 from gymnasium import spaces
 
 from mor.policy.belief import PoseBelief
-from mor.policy.features import observation_vector
+from mor.policy.features import Encode, observation_vector, pose_inputs
 from mor.policy.names import Task
 from mor.policy.observations import Tracker, observation_space
 from mor.sim.metrics import is_fixed
@@ -126,22 +126,26 @@ class HierarchicalRearrange(gym.Env):
 
     observation_space: Box (D,) the ``decision`` layout of ``mor.policy.features``; action_space: Discrete(n),
     the object to rearrange next. ``info`` carries the full task's ``metrics`` at the end and
-    ``primitive_steps``, the environment steps this decision took.
+    ``primitive_steps``, the environment steps this decision took. ``encode``: what the skills read (default: the
+    pose policies' ``pose_inputs``; a baseline's ``mor.policy.baselines.baseline_inputs``).
     """
 
     metadata = {"render_modes": []}
 
-    def __init__(self, env: gym.Env, tracker: Tracker, pick: Skill, drop: Skill, uncertainty: bool = True) -> None:
+    def __init__(self, env: gym.Env, tracker: Tracker, pick: Skill, drop: Skill, uncertainty: bool = True,
+                 encode: Encode | None = None) -> None:
         if not isinstance(env.unwrapped, RearrangeEnv):
             raise TypeError(f"HierarchicalRearrange needs MOR/Rearrange-v0, got {type(env.unwrapped).__name__}")
         self.env, self.tracker, self.skills = env, tracker, {"pick": pick, "drop": drop}
         self.uncertainty = uncertainty
+        self.encode = encode or pose_inputs(uncertainty)
         self.n_objects = env.unwrapped.config.n_objects
         self.observation_space = observation_space("decision", self.n_objects, uncertainty)
         self.action_space = spaces.Discrete(self.n_objects)
         self.chain = SkillChain()
         self.skill_rng = np.random.default_rng()
         self._observation: dict[str, Any] = {}
+        self._info: dict[str, Any] = {}
         self.belief: PoseBelief | None = None
         self.on_step: Callable[[HierarchicalRearrange], None] | None = None  # e.g. a video recorder
 
@@ -149,11 +153,11 @@ class HierarchicalRearrange(gym.Env):
         super().reset(seed=seed)
         if seed is not None:
             self.skill_rng = np.random.default_rng(seed)  # the skills' draws, as in mor.eval.lockstep
-        self._observation, info = self.env.reset(seed=seed, options=options)
-        self.belief = self.tracker.start(self._observation, info)
+        self._observation, self._info = self.env.reset(seed=seed, options=options)
+        self.belief = self.tracker.start(self._observation, self._info)
         self.chain = SkillChain()
         self._notify()
-        return self._vector("decision", self.targets), info
+        return self._decision_vector(), self._info
 
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if isinstance(action, bool | np.bool_) or not self.action_space.contains(action):
@@ -162,15 +166,16 @@ class HierarchicalRearrange(gym.Env):
         total, steps = 0.0, 0
         while True:
             task = self.chain.task
-            vector = self._vector(task, self.chain.goal(self.targets))
-            primitive = self.skills[task].act(vector, skill_mask(task), self.skill_rng)
-            self._observation, reward, terminated, truncated, info = self.env.step(primitive)
-            self.belief = self.tracker.update(self._observation, info, primitive)
+            inputs = self.encode(task, [self._observation], [self._info], self.belief,
+                                 self.chain.goal(self.targets)[None], self.env.unwrapped.arena)
+            primitive = int(self.skills[task].act_batch(inputs, skill_mask(task)[None], [self.skill_rng])[0])
+            self._observation, reward, terminated, truncated, self._info = self.env.step(primitive)
+            self.belief = self.tracker.update(self._observation, self._info, primitive)
             self._notify()
             total, steps = total + float(reward), steps + 1
             if terminated or truncated or self.chain.advance(primitive, self.held, self.n_objects):
-                info["primitive_steps"] = steps
-                return self._vector("decision", self.targets), total, terminated, truncated, info
+                info = {**self._info, "primitive_steps": steps}
+                return self._decision_vector(), total, terminated, truncated, info
 
     def action_masks(self) -> np.ndarray:
         """(n,) bool: ``decision_mask`` of the current belief (objects believed placed are not chosen again)."""
@@ -194,8 +199,9 @@ class HierarchicalRearrange(gym.Env):
         """The held object's index, n when none (the env's convention)."""
         return int(self._observation["held"])
 
-    def _vector(self, task: Task, goal: np.ndarray) -> np.ndarray:
-        return observation_vector(self.belief, np.array([self.held]), task, np.asarray(goal)[None], self.uncertainty,
+    def _decision_vector(self) -> np.ndarray:
+        """The decision's observation (D,) (the skills read ``encode``'s)."""
+        return observation_vector(self.belief, np.array([self.held]), "decision", self.targets[None], self.uncertainty,
                                   self.env.unwrapped.arena)[0]
 
     def _notify(self) -> None:

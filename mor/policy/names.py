@@ -16,3 +16,8 @@ BASELINE_VARIANTS: tuple[BaselineVariant, ...] = ("baseline_img", "baseline_delt
 
 #: the variant whose Pick policy each baseline uses (Pick's inputs are the same in all three)
 PICK_FROM: BaselineVariant = "baseline_img"
+
+
+def baseline_tasks(variant: BaselineVariant) -> tuple[Task, ...]:
+    """The skills a baseline variant trains itself: all but ``PICK_FROM`` reuse its Pick."""
+    return ("pick", "drop") if variant == PICK_FROM else ("drop",)

@@ -100,33 +100,37 @@ class GroundTruthTracker(SingleTracker):
         super().__init__(GroundTruthBatchTracker())
 
 
-class PoseObservation(gym.Wrapper):
+class PoseObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """A MOR env whose observation is the flat policy vector (``mor.policy.features``) of a tracker's belief.
 
-    observation_space: Box (D,) float32; ``action_masks()`` is the env's. ``info["belief"]`` holds the belief.
+    observation_space: Box (D,) float32; ``action_masks()`` is the env's; ``belief``: the tracker's latest belief
+    (``info`` stays the env's plain values). Its constructor's arguments are recorded in ``spec``, so that
+    ``spec.make()`` (Gymnasium's ``check_env``) builds it again.
     """
 
     def __init__(self, env: gym.Env, tracker: Tracker, uncertainty: bool = True) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, tracker=tracker, uncertainty=uncertainty)
         super().__init__(env)
         self.task: Task = task_of(env)
         self.tracker = tracker
         self.uncertainty = uncertainty
         self.observation_space = observation_space(self.task, env.unwrapped.config.n_objects, uncertainty)
+        self.belief: PoseBelief | None = None
 
     def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
         observation, info = self.env.reset(**kwargs)
-        return self._vector(observation, info, self.tracker.start(observation, info)), info
+        self.belief = self.tracker.start(observation, info)
+        return self._vector(observation), info
 
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         observation, reward, terminated, truncated, info = self.env.step(action)
-        belief = self.tracker.update(observation, info, int(action))
-        return self._vector(observation, info, belief), reward, terminated, truncated, info
+        self.belief = self.tracker.update(observation, info, int(action))
+        return self._vector(observation), reward, terminated, truncated, info
 
     def action_masks(self) -> np.ndarray:
         return self.env.unwrapped.action_masks()
 
-    def _vector(self, observation: dict[str, Any], info: dict[str, Any], belief: PoseBelief) -> np.ndarray:
-        info["belief"] = belief
+    def _vector(self, observation: dict[str, Any]) -> np.ndarray:
         goal = task_goal(observation, self.task)[None]
-        return observation_vector(belief, np.array([observation["held"]]), self.task, goal, self.uncertainty,
+        return observation_vector(self.belief, np.array([observation["held"]]), self.task, goal, self.uncertainty,
                                   self.env.unwrapped.arena)[0]

@@ -4,16 +4,13 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from mor.params_model import ParamsModel, Seeds
 from mor.policy.names import VARIANTS, Task, Variant
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class PPOParams(_Strict):
+class PPOParams(ParamsModel):
     """One policy's PPO run (sb3-contrib MaskablePPO). ``hidden``: the MLP's hidden widths; with the output layer
     four hidden layers make the paper's five-layer MLP (shared by the actor and the critic's shapes)."""
 
@@ -35,7 +32,7 @@ class PPOParams(_Strict):
     checkpoint_every: int = Field(50_000, ge=1, description="steps between resumable checkpoints")
 
 
-class BaselineParams(_Strict):
+class BaselineParams(ParamsModel):
     """The end-to-end CNN baselines (``mor.policy.baselines``): encoder and their Pick and Drop PPO runs."""
 
     encoder: Literal["nature_cnn", "compact", "resnet18", "resnet50"] = Field(
@@ -46,7 +43,7 @@ class BaselineParams(_Strict):
     drop: PPOParams = Field(default_factory=PPOParams)
 
 
-class PolicyParams(_Strict):
+class PolicyParams(ParamsModel):
     """Phase I (pick, drop) and phase II (decision) training for each observation variant."""
 
     seed: int = Field(0, ge=0)
@@ -64,10 +61,10 @@ class PolicyParams(_Strict):
                                         description="fine-tuning steps of the L-Net variants when warm-started")
 
 
-class EvalParams(_Strict):
+class EvalParams(ParamsModel):
     """The evaluation protocol: the same ``episodes`` episode seeds per seed for every method."""
 
-    seeds: list[int] = Field(default_factory=lambda: [0, 1, 2, 3, 4], min_length=1)
+    seeds: Seeds = Field(default_factory=lambda: [0, 1, 2, 3, 4])
     episodes: int = Field(100, ge=1, le=100_000)
     n_envs: int = Field(8, ge=1, le=256, description="episodes played in lockstep (one batched forward each step)")
     workers: int = Field(1, ge=1, le=1024, description="jobs (one per task and seed) played at once")

@@ -4,15 +4,14 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import Field, ValidationError
 
 from mor.errors import ConfigError
+from mor.params_model import ParamsModel
 
 
-class SimConfig(BaseModel):
+class SimConfig(ParamsModel):
     """What a world looks like. Distances in metres, image size in pixels (square images)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     n_objects: int = Field(3, ge=1, le=5, description="objects per episode")
     image_size: int = Field(64, ge=16, le=512, description="first-person image side, pixels")
@@ -31,7 +30,7 @@ def format_validation_error(error: ValidationError, where: str) -> str:
     prefix = f"{place}: " if place else ""
     if first["type"] == "extra_forbidden":
         return f"{prefix}unknown key; remove it or fix its spelling"
-    return f"{prefix}{first['msg']} (got {first.get('input')!r})"
+    return f"{prefix}{first['msg'].removeprefix('Value error, ')} (got {first.get('input')!r})"
 
 
 def make_sim_config(where: str = "", **values: object) -> SimConfig:

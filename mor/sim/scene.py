@@ -135,12 +135,20 @@ class Scene:
     """
 
     def __init__(self, arena: Arena, image_size: int, n_landmarks: int) -> None:
+        self._setup(arena, mujoco.MjModel.from_xml_string(build_mjcf(arena, image_size, n_landmarks)), n_landmarks,
+                    "fpv", (image_size, image_size), show_agent=False)
+
+    def _setup(self, arena: Arena, model: mujoco.MjModel, n_landmarks: int, camera: str, size: tuple[int, int],
+               show_agent: bool) -> None:
+        """Bind the scene to ``model`` (built from ``build_mjcf``), drawn from its fixed camera ``camera`` into
+        frames of ``size`` (width, height) pixels; ``show_agent``: draw the robot's own body (the first-person
+        camera must not see it)."""
         self.arena = arena
-        self.image_size = image_size
-        self.model = mujoco.MjModel.from_xml_string(build_mjcf(arena, image_size, n_landmarks))
+        self.width, self.height = size
+        self.model = model
         self.data = mujoco.MjData(self.model)
         self._scene_option = mujoco.MjvOption()
-        self._scene_option.geomgroup[_AGENT_GROUP] = 0
+        self._scene_option.geomgroup[_AGENT_GROUP] = int(show_agent)
         self._wall_geoms = [self.model.geom(f"wall{k}").id for k in range(arena.n_walls)]
         self._wall_materials = [self.model.material(f"wall{i}").id for i in range(len(ALL_WALL_TEXTURES))]
         self._object_mocap = np.array([self.model.body(f"object{c}").mocapid[0] for c in range(N_CLASSES)])
@@ -154,9 +162,9 @@ class Scene:
         self._geom_alpha = self.model.geom_rgba[:, 3]
         self._camera = mujoco.MjvCamera()
         self._camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
-        self._camera.fixedcamid = self.model.camera("fpv").id
-        self._viewport = mujoco.MjrRect(0, 0, image_size, image_size)
-        self._pixels = np.empty((image_size, image_size, 3), np.uint8)  # OpenGL's rows: bottom row first
+        self._camera.fixedcamid = self.model.camera(camera).id
+        self._viewport = mujoco.MjrRect(0, 0, self.width, self.height)
+        self._pixels = np.empty((self.height, self.width, 3), np.uint8)  # OpenGL's rows: bottom row first
         self._gl: Any = None  # mujoco.GLContext of the backend MUJOCO_GL names
         self._current_context: Callable[[], Any] | None = None
         self._gl_address: int | None = None
@@ -208,7 +216,7 @@ class Scene:
         mujoco.mjr_render(self._viewport, scene, context)
 
     def read_pixels(self) -> np.ndarray:
-        """The drawn frame, (image_size, image_size, 3) uint8, a new array (OpenGL's rows run bottom-up)."""
+        """The drawn frame, (height, width, 3) uint8, a new array (OpenGL's rows run bottom-up)."""
         mujoco.mjr_readPixels(self._pixels, None, self._viewport, self._mjr_context)
         return np.flipud(self._pixels).copy()
 
@@ -225,7 +233,7 @@ class Scene:
         """The scene's geom buffer and MuJoCo's render context, created with the GL context on first use."""
         if self._mjr_context is None:
             try:
-                self._gl = mujoco.GLContext(self.image_size, self.image_size)
+                self._gl = mujoco.GLContext(self.width, self.height)
                 self._gl.make_current()
                 self._mjr_context = mujoco.MjrContext(self.model, mujoco.mjtFontScale.mjFONTSCALE_150.value)
                 mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, self._mjr_context)

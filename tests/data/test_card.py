@@ -67,7 +67,7 @@ def test_coverage_png_is_an_image(square_arena: Arena, tmp_path: Path) -> None:
     path = write_coverage_png(counts, extent, square_arena, tmp_path / "coverage.png")
     with Image.open(path) as image:
         assert image.format == "PNG" and image.size[0] > 200
-    assert not list(tmp_path.glob("*.partial"))
+    assert not list(tmp_path.glob("*.partial*"))
 
 
 def test_episode_events_count_actions_and_held_changes() -> None:
@@ -108,7 +108,7 @@ def test_dataset_card_from_a_tiny_collection(tiny_collection: Path, tiny_spec: C
     for link in links:
         with Image.open(out / link) as image:
             image.verify()
-    assert not list(out.glob("*.partial"))
+    assert not list(out.glob("*.partial*"))
 
     assert manifest_version(table) in card
     for split in splits:

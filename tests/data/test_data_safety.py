@@ -21,7 +21,7 @@ from mor.data import lerobot_build, schema
 from mor.data.collect import CollectionSpec, ProfileMismatch, ProfileShape, collect
 from mor.data.episode_io import EpisodeFileError, read_episode, verify_episode
 from mor.data.exploration import ExplorationParams
-from mor.data.manifest import EpisodesRejected, build_manifest, file_sha256, write_manifest
+from mor.data.manifest import EpisodesRejected, build_manifest, file_sha256, listed_files, write_manifest
 from mor.data.sequences import SequenceWindows
 from mor.data.validate import validate
 from mor.errors import ConfigError
@@ -134,6 +134,30 @@ def test_build_refuses_a_corrupt_episode_and_leaves_the_manifest_alone(project: 
     assert not paths.LEROBOT.exists()
 
 
+def test_build_never_readmits_a_listed_file_whose_bytes_changed(project: Path, tiny_spec: CollectionSpec,
+                                                                tiny_episodes: int) -> None:
+    from pipelines import build, paths
+
+    files = sorted(paths.EPISODES.glob("*.mcap"))
+    write_manifest(build_manifest(files, paths.DATASETS, ProfileShape(tiny_spec)), paths.MANIFEST)
+    before, bad = paths.MANIFEST.read_bytes(), files[2]
+    data = bytearray(bad.read_bytes())
+    data[9] ^= 0xFF  # the header record's length: every message still decodes through the index
+    bad.write_bytes(bytes(data))
+    verify_episode(bad)
+    expected = f"^{bad}: its bytes changed since the build that listed it .*; delete it and re-collect"
+    with pytest.raises(EpisodesRejected, match=expected) as error:
+        build.run(_profile(tiny_spec))
+    assert "\n" not in str(error.value) and paths.MANIFEST.read_bytes() == before
+    rows = pq.read_table(paths.MANIFEST).to_pylist()
+    report = validate(rows, paths.DATASETS, (paths.EPISODES,), paths.LEROBOT, ProfileShape(tiny_spec), progress=False)
+    assert report.rejected == [str(bad.relative_to(paths.DATASETS))]
+    assert report.problems[0] == str(error.value).removesuffix("; the manifest is unchanged")
+    # Re-collected, it has its listed bytes again and is admitted.
+    collect(tiny_spec, paths.EPISODES, tiny_episodes, workers=1, progress=False, rejected={bad.name})
+    build_manifest(files, paths.DATASETS, ProfileShape(tiny_spec), listed_files(paths.MANIFEST))
+
+
 def test_manifest_is_replaced_only_after_the_splits_are_built(project: Path, tiny_spec: CollectionSpec,
                                                              monkeypatch: pytest.MonkeyPatch) -> None:
     from pipelines import build, paths
@@ -159,7 +183,7 @@ def test_build_decodes_only_what_no_finished_build_has_decoded(project: Path, ti
     write_manifest(build_manifest(files[:-1], paths.DATASETS, ProfileShape(tiny_spec)), paths.MANIFEST)
     decoded: list[Path] = []
     monkeypatch.setattr(manifest_module, "verify_episode", lambda path: decoded.append(path) or verify_episode(path))
-    build_manifest(files, paths.DATASETS, ProfileShape(tiny_spec), manifest_module.decoded_files(paths.MANIFEST))
+    build_manifest(files, paths.DATASETS, ProfileShape(tiny_spec), listed_files(paths.MANIFEST))
     assert decoded == [files[-1]]
 
 

@@ -20,10 +20,12 @@ from mor.data.real import (
     ImportParams,
     RealBagError,
     RealTopics,
+    executed_actions,
     import_rosbag,
     make_import_params,
     make_real_topics,
 )
+from mor.data.ros2_messages import MSGDEFS, stamp, twist, yaw_quaternion
 from mor.data.schema import NO_ACTION
 from mor.errors import ConfigError, MorError
 from mor.sim.rules import Action
@@ -31,28 +33,6 @@ from mor.sim.rules import Action
 # --- a synthetic TurtleBot recording -------------------------------------------------------------------------------
 
 BASE_NS = 1_700_000_123_000_000_000
-SEP = "=" * 80 + "\n"
-
-
-def _msgdef(top: str, *deps: tuple[str, str]) -> str:
-    return top.strip() + "\n" + "".join(SEP + f"MSG: {name}\n" + text.strip() + "\n" for name, text in deps)
-
-
-_TIME = ("builtin_interfaces/msg/Time", "int32 sec\nuint32 nanosec")
-_HEADER = ("std_msgs/msg/Header", "builtin_interfaces/Time stamp\nstring frame_id")
-_POINT = ("geometry_msgs/msg/Point", "float64 x\nfloat64 y\nfloat64 z")
-_QUAT = ("geometry_msgs/msg/Quaternion", "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1")
-_POSE = ("geometry_msgs/msg/Pose", "Point position\nQuaternion orientation")
-_VEC3 = ("geometry_msgs/msg/Vector3", "float64 x\nfloat64 y\nfloat64 z")
-MSGDEFS = {
-    "sensor_msgs/msg/CompressedImage": _msgdef("std_msgs/Header header\nstring format\nuint8[] data", _HEADER, _TIME),
-    "sensor_msgs/msg/Image": _msgdef("std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\n"
-                                     "uint8 is_bigendian\nuint32 step\nuint8[] data", _HEADER, _TIME),
-    "geometry_msgs/msg/PoseStamped": _msgdef("std_msgs/Header header\nPose pose", _HEADER, _TIME, _POSE, _POINT, _QUAT),
-    "geometry_msgs/msg/Twist": _msgdef("Vector3 linear\nVector3 angular", _VEC3),
-    "std_msgs/msg/String": _msgdef("string data"),
-    "std_msgs/msg/Int32": _msgdef("int32 data"),
-}
 IMAGE_W, IMAGE_H, BAND = 80, 60, 10  # 4:3 frames; the side bands (red) are what the centre crop removes
 
 
@@ -88,17 +68,12 @@ def _image_bytes(j: int, image_format: str) -> tuple[bytes, str]:
     return buffer.getvalue(), image_format
 
 
-def _quat(yaw: float) -> dict[str, float]:
-    return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)}
-
-
 def _ns(t: float) -> int:
     return BASE_NS + int(round(t * 1e9))
 
 
 def _stamp(t: float) -> dict[str, int]:
-    ns = _ns(t)
-    return {"sec": ns // 10**9, "nanosec": ns % 10**9}
+    return stamp(_ns(t))
 
 
 def write_synthetic_turtlebot_bag(
@@ -155,20 +130,19 @@ def write_synthetic_turtlebot_bag(
             x, y, yaw = agent(t)
             events.append((t, topics.agent_pose, "geometry_msgs/msg/PoseStamped", {
                 "header": {"stamp": _stamp(t), "frame_id": "map"},
-                "pose": {"position": {"x": x, "y": y, "z": 0.0}, "orientation": _quat(yaw)}}, pose_latency))
+                "pose": {"position": {"x": x, "y": y, "z": 0.0}, "orientation": yaw_quaternion(yaw)}}, pose_latency))
         for j in range(int(n_seconds * 5) + 1):
             t = 0.013 + j / 5
             for i, topic in enumerate(topics.object_topics(n_objects)):
                 x, y = objects(i, t)
                 events.append((t, topic, "geometry_msgs/msg/PoseStamped", {
                     "header": {"stamp": _stamp(t), "frame_id": "map"},
-                    "pose": {"position": {"x": x, "y": y, "z": 0.0}, "orientation": _quat(0.3)}}, pose_latency))
+                    "pose": {"position": {"x": x, "y": y, "z": 0.0}, "orientation": yaw_quaternion(0.3)}}, pose_latency))
         for t, action in actions or ():
             kind = "std_msgs/msg/Int32" if isinstance(action, int) else "std_msgs/msg/String"
             events.append((t, topics.action, kind, {"data": action}, 0.0))
         for t, linear, angular in twists or ():
-            events.append((t, topics.cmd_vel, "geometry_msgs/msg/Twist", {
-                "linear": {"x": linear, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": angular}}, 0.0))
+            events.append((t, topics.cmd_vel, "geometry_msgs/msg/Twist", twist(linear, angular), 0.0))
         for t, index in held or ():
             events.append((t, topics.held, "std_msgs/msg/Int32", {"data": index}, 0.0))
         for t, topic, kind, message, latency in sorted(events, key=lambda e: e[0] + e[4]):
@@ -192,12 +166,12 @@ HELD_STREAM = [(0.25 * j, 1 if 2.0 <= 0.25 * j < 3.0 else -1) for j in range(17)
 
 def expected_string_actions() -> list[int]:
     """Frame k's window [k/10, (k+1)/10) holds event m when k = 2 + 5m; the event then stays 'executing' for the
-    next four frames (younger than action_hold_s = 1 s); the idle event at 3.75 s (frame 37) ends it after
-    frame 37 (at 3.7 s the MOVE of 3.25 s is still executing)."""
+    next four frames (younger than action_hold_s = 1 s); the idle event at 3.75 s falls in frame 37's window: the
+    robot stopped there, so frame 37 is idle too (the MOVE of 3.25 s no longer counts)."""
     actions = [NO_ACTION, NO_ACTION]
     for m in range(7):
         actions += [ACTION_IDS[m]] * 5
-    return actions + [ACTION_IDS[6], NO_ACTION, NO_ACTION, NO_ACTION]
+    return actions + [NO_ACTION] * 4
 
 
 def expected_object(i: int, t: float) -> tuple[float, float]:
@@ -312,11 +286,34 @@ def test_cmd_vel_only_with_held_topic(tmp_path: Path) -> None:
     episode = read_episode(import_rosbag(bag, tmp_path / "out", RealTopics(), params()), with_images=False)
     assert episode.header.params["sources"]["actions"] == "cmd_vel"
     move, left, right, pick, drop = (int(a) for a in Action)
-    want = [move] * 10 + [left] * 10 + [left] + [NO_ACTION] * 9 + [right] * 10 + [NO_ACTION]
+    want = [move] * 10 + [left] * 10 + [NO_ACTION] * 10 + [right] * 10 + [NO_ACTION]  # frame 20: zero Twists
     want[24], want[28] = pick, drop  # the held topic's changes at 2.42 s and 2.82 s
     assert episode.actions.tolist() == want
     assert np.flatnonzero(episode.held == 0).tolist() == [25, 26, 27, 28]
     np.testing.assert_allclose(episode.object_positions[25:29, 0], episode.agent_poses[25:29, :2])
+
+
+def test_a_robot_that_stops_and_starts_is_idle_when_it_stops_or_is_blocked(tmp_path: Path) -> None:
+    """cmd_vel: MOVE on [0, 1) s, zero Twists on [1, 2), MOVE on [2, 4); the robot moves on [0, 1) and [2, 3) and
+    is blocked on [3, 4). A frame is MOVE only where the robot was commanded to move and did."""
+    def moving(t: float) -> float:  # seconds spent moving up to t
+        return min(max(t, 0.0), 1.0) + min(max(t - 2.0, 0.0), 1.0)
+
+    def agent(t: float) -> tuple[float, float, float]:
+        return -1.0 + 0.2 * moving(t), 0.0, 0.0
+
+    twists = [(0.01 + 0.05 * j, 0.0 if 1.0 <= 0.01 + 0.05 * j < 2.0 else 0.1, 0.0) for j in range(80)]
+    bag = write_synthetic_turtlebot_bag(tmp_path / "stop_start.mcap", agent=agent, twists=twists)
+    episode = read_episode(import_rosbag(bag, tmp_path / "out", RealTopics(), params()), with_images=False)
+    move = int(Action.MOVE)
+    assert episode.actions.tolist() == [move] * 10 + [NO_ACTION] * 10 + [move] * 10 + [NO_ACTION] * 11
+
+
+def test_executed_actions_follow_the_tracked_pose() -> None:
+    poses = np.array([[0, 0, 0], [0.1, 0, 0], [0.1, 0, 0], [0.1, 0, 0.17], [0.1, 0, 0.17], [0.1, 0, 0.17]], float)
+    commands = np.array([Action.MOVE, Action.MOVE, Action.TURN_LEFT, Action.TURN_RIGHT, Action.PICK, Action.DROP])
+    assert executed_actions(commands, poses).tolist() == [int(Action.MOVE), NO_ACTION, int(Action.TURN_LEFT),
+                                                          NO_ACTION, int(Action.PICK), NO_ACTION]
 
 
 def test_held_inferred_from_pick_and_drop(tmp_path: Path) -> None:
@@ -427,6 +424,8 @@ def test_cli_imports_a_bag_and_names_a_missing_topic(string_bag: Path, tmp_path:
     assert result.exit_code == 0, result.output
     episode = read_episode(out / "real-cli.mcap", with_images=False)
     assert episode.header.source == "real" and list(episode.header.object_classes) == [0, 7, 13]
+    again = CliRunner().invoke(app, args)
+    assert again.exit_code == 0 and f"replaced the existing episode {out / 'real-cli.mcap'}" in again.output
     bad = CliRunner().invoke(app, [*args, "--agent-pose-topic", "/nope"])
     assert bad.exit_code == 2
     lines = bad.output.strip().splitlines()

@@ -7,7 +7,7 @@ import pytest
 import torch
 from sb3_contrib import MaskablePPO
 
-from mor.eval.lockstep import play_lockstep, pose_inputs
+from mor.eval.lockstep import play_lockstep
 from mor.eval.methods import METHODS, TrainedPolicies
 from mor.eval.protocol import decider
 from mor.lnet.calibration import Calibration
@@ -15,6 +15,7 @@ from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig
 from mor.lnet.runtime import LNetRunner
 from mor.policy.envs import make_policy_env
+from mor.policy.features import pose_inputs
 from mor.policy.hierarchy import Skill
 from mor.policy.lnet_tracking import LNetBatchTracker, LNetTracker
 from mor.policy.observations import GroundTruthBatchTracker, GroundTruthTracker

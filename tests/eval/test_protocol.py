@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -48,6 +51,47 @@ def test_every_method_plays_the_same_episodes_and_a_rerun_resumes(tmp_path) -> N
     summaries = metric_summaries(oracle, resamples=200)
     assert set(summaries) == {"pick_success", "drop_success", "rearrange_success", "fixed_strict", "energy_remaining"}
     assert summaries["pick_success"]["mean"] == 1.0
+
+
+def _edit(line: str, change: dict) -> str:
+    return json.dumps({**json.loads(line), **change})
+
+
+@pytest.mark.parametrize(("replace", "problem"), [
+    (lambda line: "42", "not an episode record (Input should be a valid dictionary"),
+    (lambda line: "{}", "not an episode record (method: Field required (got {}))"),
+    (lambda line: line[:20], "not JSON"),
+    (lambda line: _edit(line, {"metrics": {"success": 0.0}}), "the record does not match its digest (edited"),
+    (lambda line: _edit(line, {"steps": True}), "not an episode record (steps: Input should be a valid integer"),
+    (lambda line: _edit(line, {"metrics": {}}), "not an episode record (metrics: a pick record needs success"),
+    (lambda line: _edit(line, {"reset_seed": 7}), "not an episode record (reset_seed: 7 is not the reset seed of seed 0, episode 0"),
+    (lambda line: json.dumps({k: v for k, v in json.loads(line).items() if k != "digest"}),
+     "a record without its digest (written before records were sealed)"),
+])
+def test_a_line_that_is_not_a_sealed_record_is_one_line_naming_file_and_line(tmp_path: Path, replace, problem
+                                                                              ) -> None:
+    path = tmp_path / "oracle.jsonl"
+    run_protocol(method_spec("oracle"), SIM, [0], 1, path, progress=False, played_by={"lnet_version": "a"})
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join([replace(lines[0]), *lines[1:]]) + "\n")
+    with pytest.raises(ConfigError) as error:
+        run_protocol(method_spec("oracle"), SIM, [0], 1, path, progress=False, played_by={"lnet_version": "a"})
+    message = str(error.value)
+    assert "\n" not in message and message.startswith(f"{path}:1: {problem}"), message
+    assert message.endswith("delete that line to play its episode again, or delete the file and "
+                            "oracle.played_by.json to play every episode again")
+
+
+def test_records_are_sealed_with_what_played_them(tmp_path: Path) -> None:
+    path = tmp_path / "oracle.jsonl"
+    run_protocol(method_spec("oracle"), SIM, [0], 1, path, progress=False, played_by={"lnet_version": "a"})
+    assert len(read_records(path)) == 3
+    (tmp_path / "oracle.played_by.json").write_text(json.dumps({"lnet_version": "b"}))  # a sidecar edited by hand
+    with pytest.raises(ConfigError, match=r"oracle.jsonl:1: the record does not match its digest"):
+        read_records(path)
+    (tmp_path / "oracle.played_by.json").write_text("{not json")
+    with pytest.raises(ConfigError, match=r"oracle.played_by.json: not JSON; delete it and oracle.jsonl to play"):
+        read_records(path)
 
 
 def test_rows_are_replaced_by_key_and_kept_in_order() -> None:

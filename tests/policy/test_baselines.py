@@ -9,10 +9,9 @@ from stable_baselines3.common.preprocessing import preprocess_obs
 
 from mor.eval.methods import METHODS
 from mor.eval.protocol import decider, sim_of
-from mor.policy.baselines import (BASELINE_INPUTS, BaselineExtractor, BaselineObservation, baseline_inputs,
-                                  baseline_tasks)
+from mor.policy.baselines import BASELINE_INPUTS, BaselineExtractor, BaselineObservation, baseline_inputs
 from mor.policy.envs import make_task_env
-from mor.policy.names import BASELINE_VARIANTS
+from mor.policy.names import BASELINE_VARIANTS, baseline_tasks
 from mor.policy.signature import PolicySignature
 from mor.sim.config import SimConfig
 from mor.sim.geometry import bearing

@@ -30,7 +30,10 @@ class OracleSkill:
     def __init__(self, task: str) -> None:
         self.task, self.env, self.goal, self.calls = task, None, None, []
 
-    def act(self, vector: np.ndarray, mask: np.ndarray, rng: np.random.Generator | None = None) -> int:
+    def act_batch(self, inputs: np.ndarray, masks: np.ndarray, rngs: list[np.random.Generator] | None = None
+                  ) -> np.ndarray:
+        """The oracle's action for the one env the hierarchy plays (``Skill.act_batch`` with k = 1)."""
+        mask = masks[0]
         base = self.env.env.unwrapped
         state = WorldState(base.state.agent_pose.copy(), base.state.object_positions(), base.state.held)
         oracle = Oracle(base.arena, base.noise)
@@ -38,7 +41,7 @@ class OracleSkill:
                   else oracle.drop(state, base.layout.target_positions[state.held]))
         self.calls.append(action)
         assert mask[action], f"{self.task} skill took a masked action"
-        return action
+        return np.array([action])
 
 
 def test_skill_masks_remove_what_the_subtasks_remove() -> None:

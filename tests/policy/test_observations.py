@@ -2,23 +2,32 @@
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Callable
+
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from gymnasium.utils.env_checker import check_env as gymnasium_check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from mor.lnet.calibration import Calibration
 from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig
 from mor.lnet.runtime import LNetRunner
+from mor.errors import ConfigError
+from mor.policy.baselines import BASELINE_INPUTS, BaselineObservation
 from mor.policy.belief import PoseBelief
-from mor.policy.envs import make_policy_env, make_task_env
+from mor.policy.envs import baseline_sim, make_policy_env, make_task_env
 from mor.policy.features import feature_names, observation_vector
-from mor.policy.names import TASKS
+from mor.policy.names import BASELINE_VARIANTS, TASKS
 from mor.policy.lnet_tracking import LNetTracker, LNetVecObservation
 from mor.policy.observations import GroundTruthTracker
 from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
+from mor.sim.rules import Action
 
 SIM = SimConfig(n_objects=2, image_size=16)
 ARENA = Arena.build("square", 6.0)
@@ -111,3 +120,60 @@ def test_clearance_is_the_free_distance_to_walls_and_floor_objects_but_not_the_h
     assert carried[ahead] == pytest.approx(min(3.0 - AGENT_RADIUS, 3.0))
     near_wall = clearance(_belief(agent=(2.5, 0.0, 0.0)), np.array([2]), ARENA)[0]
     assert near_wall[ahead] == pytest.approx(0.5 - AGENT_RADIUS)
+
+
+def test_a_task_that_is_not_a_policys_names_the_policy_tasks() -> None:
+    with pytest.raises(ConfigError, match=r"^task: 'rearrange' is not a policy's task; choose one of pick, drop, "
+                                          r"decision \(decision plays the full rearrangement\)$"):
+        make_policy_env("rearrange", SIM, GroundTruthTracker(), uncertainty=True)
+
+
+class _EndingSkill:
+    """A stand-in skill that ends its part of a decision at once (PICK, then DROP): the decision env's checks stay
+    a few primitive steps long."""
+
+    def __init__(self, action: Action) -> None:
+        self.action = action
+
+    def act_batch(self, inputs: np.ndarray, masks: np.ndarray, rngs: list | None = None) -> np.ndarray:
+        return np.full(len(masks), int(self.action))
+
+
+def _policy_envs() -> dict[str, Callable[[], gym.Env]]:
+    """Every policy environment ``mor.policy.envs`` makes: each variant's Pick and Drop (the L-Net's through a tiny
+    untrained L-Net), the decision's over untrained skills, and each baseline's."""
+    envs: dict[str, Callable[[], gym.Env]] = {}
+    trackers = {"gt_pose": (GroundTruthTracker, True), "lnet": (lambda: LNetTracker(_runner()), True),
+                "lnet_no_uncertainty": (lambda: LNetTracker(_runner()), False)}
+    for variant, (tracker, uncertainty) in trackers.items():
+        for task in ("pick", "drop"):
+            envs[f"{variant}-{task}"] = lambda t=task, m=tracker, u=uncertainty: make_policy_env(t, SIM, m(), u)
+        if uncertainty:
+            envs[f"{variant}-decision"] = lambda m=tracker: make_policy_env(
+                "decision", SIM, m(), True, (_EndingSkill(Action.PICK), _EndingSkill(Action.DROP)))
+    for variant in BASELINE_VARIANTS:
+        for task in ("pick", "drop"):
+            envs[f"{variant}-{task}"] = lambda t=task, v=variant: BaselineObservation(
+                make_task_env(t, baseline_sim(v, SIM), render_frames=True), BASELINE_INPUTS[v])
+    return envs
+
+
+POLICY_ENVS = _policy_envs()
+#: What the checkers advise against by design: a wrapper is checked as it is (not its unwrapped MOR env), the
+#: policy vector is unbounded (covariances), and the tests' 16-pixel frames are below NatureCNN's 36 (the compact
+#: encoder takes any size).
+ADVICE = ("is different from the unwrapped version", "observation space minimum value is -infinity",
+          "observation space maximum value is infinity", "minimal resolution for an image is 36x36")
+
+
+@pytest.mark.parametrize("checker", [lambda env: gymnasium_check_env(env, skip_render_check=True), sb3_check_env],
+                         ids=["gymnasium", "sb3"])
+@pytest.mark.parametrize("name", sorted(POLICY_ENVS))
+def test_every_policy_env_passes_gymnasiums_and_sb3s_checks(name: str, checker: Callable[[gym.Env], None]) -> None:
+    env = POLICY_ENVS[name]()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the checkers' complaints are warnings: make them fail
+        for advice in ADVICE:
+            warnings.filterwarnings("ignore", message=f".*{advice}")
+        checker(env)
+    env.close()

@@ -1,0 +1,62 @@
+"""What ``mor policy train`` runs for a variant, decided in one place: each task's PPO parameters and where it
+starts from. ``mor policy plan`` prints it; ``pipelines.train_policy`` runs it.
+
+Starts (docs/assumptions.md, "Policies"):
+- in a setting with ``finetune_from_main``: the main workspace's policy of the same variant and task (the decision
+  only where its action space, one action per object, is the same);
+- otherwise the L-Net variants start from this workspace's ``gt_pose`` policy when ``policy.lnet_warm_start``;
+- a policy that starts from another trains ``policy.lnet_steps[task]`` steps, not its task's ``steps``;
+- the baselines train their own skills (``baseline_tasks``) from scratch with ``policy.baseline``'s parameters.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from mor.config import Profile
+from mor.policy.names import BASELINE_VARIANTS, BaselineVariant, Task, Variant, baseline_tasks
+from mor.policy.params import PPOParams
+from mor.policy.signature import read_signature
+
+
+@dataclass(frozen=True)
+class TaskPlan:
+    """One policy's training: ``params`` as it will run (after every override), ``start`` the committed policy
+    folder it fine-tunes (None: a random start) and ``why`` in words."""
+
+    task: Task
+    params: PPOParams
+    start: Path | None
+    why: str
+
+
+def _start(profile: Profile, variant: Variant, task: Task, own: Path, main: Path) -> tuple[Path | None, str]:
+    setting, policy = profile.setting, profile.policy
+    if setting is not None and setting.finetune_from_main:
+        source = main / variant / task
+        if task != "decision" or read_signature(source / "meta.json").n_objects == profile.sim.n_objects:
+            return source, "fine-tunes the main workspace's policy (setting.finetune_from_main)"
+    if variant != "gt_pose" and policy.lnet_warm_start:
+        return own / "gt_pose" / task, "fine-tunes this workspace's gt_pose policy (policy.lnet_warm_start)"
+    return None, "from a random start"
+
+
+def training_plan(profile: Profile, variant: Variant | BaselineVariant, tasks: tuple[Task, ...], own: Path,
+                  main: Path) -> list[TaskPlan]:
+    """The plan of ``tasks`` (in order) of ``variant``; ``own`` and ``main``: the committed policy folders
+    (``cards/policy``) of this workspace and of the main one."""
+    policy = profile.policy
+    if variant in BASELINE_VARIANTS:
+        return [TaskPlan(task, getattr(policy.baseline, task), None,
+                         f"from a random start, encoder {policy.baseline.encoder}")
+                for task in baseline_tasks(variant) if task in tasks]
+    plans = []
+    for task in tasks:
+        start, why = _start(profile, variant, task, own, main)
+        params = getattr(policy, task)
+        if start is not None:
+            params = params.model_copy(update={"steps": policy.lnet_steps[task]})
+            why += f"; policy.lnet_steps.{task} = {policy.lnet_steps[task]:,} steps replace {task}.steps"
+        plans.append(TaskPlan(task, params, start, why))
+    return plans
