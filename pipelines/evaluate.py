@@ -25,8 +25,7 @@ from mor.eval.video import write_policy_video
 from mor.locking import writer_lock
 from mor.policy.hierarchy import POLICY_FILE
 from mor.policy.names import TASKS, VARIANTS
-from mor.policy.observations import (BatchTracker, GroundTruthBatchTracker, RenderingTruthTracker, SingleTracker,
-                                     has_uncertainty)
+from mor.policy.observations import BatchTracker, GroundTruthBatchTracker, RenderingTruthTracker
 from mor.policy.signature import read_signature
 from mor.sim.arena import Arena
 from pipelines import paths, settings
@@ -143,9 +142,9 @@ def policy_video(profile: Profile, method_name: str, seed: int, out: Path) -> di
         raise ConfigError(f"--policy: {method_name!r} is scripted; use mor sim video --policy {method_name}")
     policies, tracker_factory, _ = load_method(profile, method)
     arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
-    return write_policy_video(out, sim_of(method, profile.sim), SingleTracker(tracker_factory(1)), policies.pick,
-                              policies.drop, decider(method, policies, arena), has_uncertainty(method.variant), seed,
-                              horizon=profile.evaluate.horizon, encode=method_inputs(method))
+    return write_policy_video(out, sim_of(method, profile.sim), tracker_factory(1),
+                              {"pick": policies.pick, "drop": policies.drop}, decider(method, policies, arena),
+                              method_inputs(method), seed, horizon=profile.evaluate.horizon)
 
 
 def collect_results(profile_name: str) -> Path:

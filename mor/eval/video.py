@@ -1,64 +1,112 @@
-"""A policy video: one rearrangement episode, the first-person view beside a top-down view of the truth and the
-policy's belief (2σ ellipses), drawn by ``mor.lnet.figures.write_estimate_gif``."""
+"""A policy video: one rearrangement episode played by the hierarchy (``SkillHierarchy``), the first-person view
+beside a top-down view of the truth and the policy's belief (2σ ellipses, ``mor.lnet.figures.write_estimate_gif``),
+annotated with what the policy does: the targets, the running skill and its object, the action, the held object,
+and at the end why the episode ended."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.lines import Line2D
+from tqdm import tqdm
 
-from mor.eval.lockstep import Decide
 from mor.lnet.figures import write_estimate_gif
 from mor.policy.envs import make_task_env
 from mor.policy.features import Encode
-from mor.policy.hierarchy import HierarchicalRearrange, Skill
-from mor.policy.observations import Tracker
+from mor.policy.hierarchy import Decide, Skill, SkillHierarchy
+from mor.policy.observations import BatchTracker
+from mor.sim.catalog import object_class
 from mor.sim.config import SimConfig
+from mor.sim.rules import Action
 
 _JITTER = 1e-6  # m²: the ground truth's zero covariances drawn as points
+_LEGEND = [Line2D([], [], marker="*", color="black", linestyle="", label="truth (agent, objects)"),
+           Line2D([], [], marker="o", color="grey", linestyle="", label="belief: mean and 2σ"),
+           Line2D([], [], marker="X", color="black", linestyle="", markerfacecolor="white", label="target")]
 
 
 def _tril(covariance: np.ndarray) -> np.ndarray:
     return np.linalg.cholesky(covariance + _JITTER * np.eye(2))
 
 
-def write_policy_video(path: Path, sim: SimConfig, tracker: Tracker, pick: Skill, drop: Skill, decide: Decide,
-                       uncertainty: bool, seed: int, fps: int = 8, horizon: int | None = None,
-                       encode: Encode | None = None) -> dict[str, float]:
-    """Play one ``MOR/Rearrange-v0`` episode (reset seed ``seed``; ``horizon`` caps its steps) with the hierarchy,
-    its skills fed by ``encode`` (``HierarchicalRearrange``), and write it to ``path`` (.mp4 or .gif); returns the
-    episode's metrics."""
+def end_reason(info: dict[str, Any], truncated: bool) -> str:
+    """Why a full-task episode ended, in words."""
+    if info["metrics"]["success"]:
+        return "every object placed"
+    if truncated:
+        return "out of steps (horizon)"
+    return "obstructed" if info.get("obstructed") else "ended"
+
+
+class _Recorder:
+    """Each primitive step's frame, truth, belief and the hierarchy's state, for the video."""
+
+    def __init__(self) -> None:
+        self.frames: dict[str, list] = {name: [] for name in (
+            "images", "poses", "objects", "agent_mean", "agent_tril", "heading", "kappa", "object_mean",
+            "object_tril")}
+        self.captions: list[str] = []
+
+    def __call__(self, hierarchy: SkillHierarchy) -> None:
+        slot, belief = hierarchy.slots[0], hierarchy.belief
+        state = slot.env.unwrapped.state
+        self.frames["images"].append(slot.observation["image"])
+        self.frames["poses"].append(state.agent_pose.copy())
+        self.frames["objects"].append(state.object_positions())
+        self.frames["agent_mean"].append(belief.agent_mean[0])
+        self.frames["agent_tril"].append(_tril(belief.agent_cov[0]))
+        self.frames["heading"].append(belief.heading[0])
+        self.frames["kappa"].append(1.0 / max(float(belief.heading_var[0]), _JITTER))
+        self.frames["object_mean"].append(belief.object_mean[0])
+        self.frames["object_tril"].append(_tril(belief.object_cov[0]))
+        n = len(slot.targets)
+        held = object_class(int(slot.observation["object_classes"][slot.held])).name if slot.held < n else "nothing"
+        action = Action(slot.previous).name if slot.previous >= 0 else "–"
+        skill = f"{slot.chain.task} object {slot.chain.index}" if slot.chain.task and not slot.done else "–"
+        self.captions.append(f"step {slot.steps}  last action {action}\nskill: {skill}  holding: {held}")
+
+
+def write_policy_video(path: Path, sim: SimConfig, tracker: BatchTracker, skills: dict[str, Skill], decide: Decide,
+                       encode: Encode, seed: int, fps: int = 8, horizon: int | None = None) -> dict[str, float]:
+    """Play one ``MOR/Rearrange-v0`` episode (reset seed ``seed``; ``horizon`` caps its steps) with the hierarchy
+    (``tracker`` keeps one environment; the skills read ``encode``'s inputs) and write it to ``path`` (.mp4 or
+    .gif), with a progress bar over the steps and then the frames; returns the episode's metrics."""
     env_kwargs = {} if horizon is None else {"horizon": horizon}
-    env = HierarchicalRearrange(make_task_env("decision", sim, True, **env_kwargs), tracker, pick, drop, uncertainty,
-                                encode)
-    frames: dict[str, list] = {name: [] for name in ("images", "poses", "objects", "agent_mean", "agent_tril",
-                                                     "heading", "kappa", "object_mean", "object_tril")}
+    env = make_task_env("decision", sim, True, **env_kwargs)
+    hierarchy, record = SkillHierarchy([env], tracker, skills, encode, "decision"), _Recorder()
+    bar = tqdm(total=env.horizon, desc="playing", unit="step", dynamic_ncols=True)
 
-    def record(hierarchy: HierarchicalRearrange) -> None:
-        state, belief = hierarchy.env.unwrapped.state, hierarchy.belief
-        frames["images"].append(hierarchy.observation["image"])
-        frames["poses"].append(state.agent_pose.copy())
-        frames["objects"].append(state.object_positions())
-        frames["agent_mean"].append(belief.agent_mean[0])
-        frames["agent_tril"].append(_tril(belief.agent_cov[0]))
-        frames["heading"].append(belief.heading[0])
-        frames["kappa"].append(1.0 / max(float(belief.heading_var[0]), _JITTER))
-        frames["object_mean"].append(belief.object_mean[0])
-        frames["object_tril"].append(_tril(belief.object_cov[0]))
+    def on_step(h: SkillHierarchy) -> None:
+        record(h)
+        bar.update(1)
 
-    env.on_step = record
     try:
-        env.reset(seed=seed)
-        while True:
-            choice = int(decide(env.belief, np.array([env.held]), env.targets[None], np.array([env.chain.index]))[0])
-            _, _, terminated, truncated, info = env.step(choice)
-            if terminated or truncated:
-                break
+        (_, outcome), = hierarchy.play([(None, seed)], decide, on_step)
+        bar.total = bar.n
+        bar.close()
+        slot = hierarchy.slots[0]
+        record(hierarchy)  # the world after the last step (the belief drawn is the one before it)
+        record.captions[-1] += f"\nended: {end_reason(slot.info, slot.truncated)}"
+        layout = env.unwrapped.layout
+        frames = record.frames
         truth = {"agent_poses": np.stack(frames["poses"]), "object_positions": np.stack(frames["objects"]),
-                 "object_classes": env.env.unwrapped.layout.object_classes}
+                 "object_classes": layout.object_classes}
         estimate = {key: np.stack(frames[key]) for key in ("agent_mean", "agent_tril", "heading", "kappa",
                                                            "object_mean", "object_tril")}
-        write_estimate_gif(path, env.env.unwrapped.arena, truth, estimate, np.stack(frames["images"]), fps=fps)
+
+        def annotate(ax: Axes, t: int) -> None:
+            for k, target in enumerate(layout.target_positions):
+                ax.plot(*target, "X", color=object_class(int(layout.object_classes[k])).rgb, markeredgecolor="black",
+                        markersize=8, zorder=6)
+            ax.set_title("", loc="center")
+            ax.set_title(record.captions[t], fontsize=7, loc="left")
+            ax.legend(handles=_LEGEND, fontsize=6, loc="lower left", framealpha=0.8)
+
+        write_estimate_gif(path, env.unwrapped.arena, truth, estimate, np.stack(frames["images"]), fps=fps,
+                           annotate=annotate, progress="writing")
     finally:
         env.close()
-    return dict(info["metrics"])
+    return outcome["metrics"]

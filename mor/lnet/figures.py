@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import textwrap
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,7 +32,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Polygon, Wedge
-
+from tqdm import tqdm
 
 from mor.data.observations import tensor_to_images
 from mor.lnet.likelihoods import heading_halfwidth
@@ -261,9 +261,11 @@ def write_estimate_strip(path: Path, arena: Arena, truth: Truth | Mapping[str, A
 
 
 def write_estimate_gif(path: Path, arena: Arena, truth: Truth | Mapping[str, Any], estimate: Mapping[str, Any] | Any,
-                       images: Any = None, fps: int = 5, every: int = 1, n_sigma: float = N_SIGMA) -> Path:
+                       images: Any = None, fps: int = 5, every: int = 1, n_sigma: float = N_SIGMA,
+                       annotate: Callable[[Axes, int], None] | None = None, progress: str | None = None) -> Path:
     """A GIF (or MP4, by ``path``'s suffix) of the panel at frames 0, every, 2 * every, ... (ceil(T / every) frames),
-    the first-person image (scaled to the panel's height) to its left when ``images`` is given."""
+    the first-person image (scaled to the panel's height) to its left when ``images`` is given. ``annotate(ax, t)``
+    draws more on frame t's panel (e.g. a policy's targets and actions); ``progress``: a progress bar's label."""
     if every < 1:
         raise ValueError(f"every: must be >= 1 (got {every})")
     truth = Truth.of(truth)
@@ -278,10 +280,14 @@ def write_estimate_gif(path: Path, arena: Arena, truth: Truth | Mapping[str, Any
     def frame(t: int) -> np.ndarray:
         ax.clear()
         draw_estimate_panel(ax, arena, truth, estimate, t, n_sigma)
+        if annotate is not None:
+            annotate(ax, t)
         panel = render(figure)
         return panel if pictures is None else side_by_side(pictures[t], panel)
 
-    return write_video(Path(path), (frame(t) for t in range(0, truth.n_frames, every)), fps)
+    frames = range(0, truth.n_frames, every)
+    bar = tqdm(frames, desc=progress, unit="frame", disable=progress is None, dynamic_ncols=True)
+    return write_video(Path(path), (frame(t) for t in bar), fps)
 
 
 # -------------------------------------------------------------------------------------------- calibration, loss

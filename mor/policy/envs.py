@@ -10,7 +10,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 from mor.errors import ConfigError
 from mor.policy.hierarchy import HierarchicalRearrange, Skill
 from mor.policy.names import BaselineVariant, Task, Variant
-from mor.policy.observations import GroundTruthTracker, PoseObservation, Tracker, has_uncertainty
+from mor.policy.observations import GroundTruthTracker, PoseObservation, SingleTracker, has_uncertainty
 from mor.policy.params import PPOParams
 from mor.sim.config import SimConfig
 
@@ -30,7 +30,7 @@ def make_task_env(task: Task, sim: SimConfig, render_frames: bool, **kwargs: obj
 
 
 def make_policy_env(
-    task: Task, sim: SimConfig, tracker: Tracker, uncertainty: bool, skills: tuple[Skill, Skill] | None = None,
+    task: Task, sim: SimConfig, tracker: SingleTracker, uncertainty: bool, skills: tuple[Skill, Skill] | None = None,
     **env_kwargs: object,
 ) -> gym.Env:
     """One environment with the policy's observation vector: a ``PoseObservation`` of Pick/Drop, or, for the
@@ -40,7 +40,7 @@ def make_policy_env(
     if task == "decision":
         if skills is None:
             raise ValueError("the decision policy's environment needs the trained pick and drop skills")
-        return HierarchicalRearrange(env, tracker, *skills, uncertainty)
+        return HierarchicalRearrange(env, tracker.batch, *skills, uncertainty)
     return PoseObservation(env, tracker, uncertainty)
 
 

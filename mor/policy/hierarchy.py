@@ -10,8 +10,8 @@ ends as the full task does (all placed, an obstruction, or 1,000 primitive steps
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -23,12 +23,13 @@ from gymnasium import spaces
 from mor.policy.belief import PoseBelief
 from mor.policy.features import Encode, observation_vector, pose_inputs
 from mor.policy.names import Task
-from mor.policy.observations import Tracker, observation_space
+from mor.policy.observations import BatchTracker, observation_space, task_goal
 from mor.sim.metrics import is_fixed
 from mor.sim.rules import N_ACTIONS, Action
 from mor.sim.tasks import DropEnv, PickEnv, RearrangeEnv
 
-SKILL_HORIZON = 150  # primitive steps, the Pick and Drop tasks' horizon
+#: primitive steps a skill runs at most within the full task: its own task's horizon (150 in the paper)
+SKILL_HORIZON: dict[str, int] = {"pick": PickEnv.default_horizon, "drop": DropEnv.default_horizon}
 
 
 def skill_mask(task: Task) -> np.ndarray:
@@ -111,99 +112,233 @@ class SkillChain:
     def advance(self, action: int, held: int, n_objects: int) -> bool:
         """After the skill took ``action`` (and the env stepped): move on; True when the decision is over."""
         self.steps += 1
-        if self.task == "pick" and (action == Action.PICK or self.steps >= SKILL_HORIZON):
+        if self.task == "pick" and (action == Action.PICK or self.steps >= SKILL_HORIZON["pick"]):
             if held < n_objects:
                 self.task, self.index, self.steps = "drop", held, 0
                 return False
             self.task = None
-        elif self.task == "drop" and (action == Action.DROP or self.steps >= SKILL_HORIZON):
+        elif self.task == "drop" and (action == Action.DROP or self.steps >= SKILL_HORIZON["drop"]):
             self.task = None
         return self.task is None
 
 
+#: (beliefs of k envs, held (k,), targets (k, n, 2), last (k,): the object of each env's previous decision, -1
+#: before the first) -> the object each should rearrange next (k,)
+Decide = Callable[[PoseBelief, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+EpisodeKey = Any  # what names an episode for the caller of ``SkillHierarchy.play`` (the protocol's (task, seed, e))
+
+
+@dataclass
+class Slot:
+    """One environment of a ``SkillHierarchy``: its latest observation and info, its place in the skill chain, the
+    generator of its skills' draws (seeded by the episode), and its episode so far."""
+
+    env: gym.Env
+    key: EpisodeKey = None
+    active: bool = False
+    observation: dict[str, Any] = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
+    chain: SkillChain = field(default_factory=SkillChain)
+    rng: np.random.Generator = field(default_factory=np.random.default_rng)
+    previous: int = -1  # the last primitive action; -1 at an episode's first observation
+    starting: bool = True
+    reward: float = 0.0  # of the last primitive step
+    total: float = 0.0
+    steps: int = 0
+    terminated: bool = False  # at the last step
+    truncated: bool = False
+
+    @property
+    def done(self) -> bool:
+        """The episode ended at the last step."""
+        return self.terminated or self.truncated
+
+    @property
+    def held(self) -> int:
+        """The held object's index, n when none (the env's convention)."""
+        return int(self.observation["held"])
+
+    @property
+    def targets(self) -> np.ndarray:
+        """(n, 2) every object's target position, metres (the full task's goal)."""
+        return np.asarray(self.observation["target_positions"])
+
+    def outcome(self) -> dict[str, Any]:
+        """The finished episode: the task's metrics, its primitive steps and return."""
+        return {"metrics": dict(self.info["metrics"]), "steps": self.steps, "return": self.total}
+
+
+class SkillHierarchy:
+    """The one loop of the skill hierarchy (paper section 4.2), over N environments in lockstep: one tracker pass (one
+    L-Net forward) and one batched forward per skill per primitive step.
+
+    task ``decision``: the full task (``MOR/Rearrange-v0``); a decision (``decide``) starts a slot's skill chain,
+    which runs the pick skill, then the drop skill (``SkillChain``). ``pick`` / ``drop``: that skill alone on its
+    own task, with the goal the task gives. ``encode`` turns k slots into the skills' batched input (the pose
+    layout's vectors, or a baseline's pixels). Evaluation and the policy video ``play`` episodes through it;
+    training's decision env (``HierarchicalRearrange``) drives one slot with ``start``/``observe``/``decide``/
+    ``step``. A slot's draws come from a generator seeded by its episode, so what it plays does not depend on the
+    slot or the batch.
+    """
+
+    def __init__(self, envs: list[gym.Env], tracker: BatchTracker, skills: dict[str, Skill], encode: Encode,
+                 task: Task) -> None:
+        self.slots = [Slot(env) for env in envs]
+        self.tracker, self.skills, self.encode, self.task = tracker, skills, encode, task
+        self.arena = envs[0].unwrapped.arena
+        self.belief: PoseBelief | None = None
+
+    def start(self, i: int, seed: int | None, key: EpisodeKey = None, options: dict[str, Any] | None = None) -> None:
+        """Begin an episode in slot ``i`` (reset seed ``seed``; None continues the env's and the draws' generators)."""
+        slot = self.slots[i]
+        slot.observation, slot.info = slot.env.reset(seed=seed, options=options)
+        if seed is not None:
+            slot.rng = np.random.default_rng(seed)
+        slot.key, slot.active, slot.starting, slot.terminated, slot.truncated = key, True, True, False, False
+        slot.chain, slot.previous, slot.reward, slot.total, slot.steps = SkillChain(), -1, 0.0, 0.0, 0
+
+    def stop(self, i: int) -> None:
+        """Leave slot ``i`` idle (the tracker sees its last observation again, as an episode's first)."""
+        self.slots[i].active, self.slots[i].starting = False, True
+
+    def observe(self) -> PoseBelief:
+        """The tracker's beliefs of all N slots after their latest step (or reset)."""
+        slots = self.slots
+        self.belief = self.tracker.observe([s.observation for s in slots], [s.info for s in slots],
+                                           np.array([s.previous for s in slots]), np.array([s.starting for s in slots]))
+        return self.belief
+
+    def due(self) -> list[int]:
+        """The active slots of the full task whose next decision is due."""
+        return [i for i, s in enumerate(self.slots) if s.active and self.task == "decision" and s.chain.task is None]
+
+    def decide(self, i: int, choice: int) -> None:
+        """Start decision ``choice`` (an object index) in slot ``i``."""
+        slot = self.slots[i]
+        slot.chain.decide(int(choice), slot.held, len(slot.targets))
+
+    def step(self) -> list[int]:
+        """One primitive step of every active slot (each with its skill running): the slots whose episode ended."""
+        active = [i for i, s in enumerate(self.slots) if s.active]
+        ended = []
+        for i, action in self._act(active).items():
+            slot = self.slots[i]
+            slot.observation, reward, terminated, truncated, slot.info = slot.env.step(action)
+            slot.previous, slot.starting = action, False
+            slot.reward, slot.total, slot.steps = float(reward), slot.total + float(reward), slot.steps + 1
+            slot.terminated, slot.truncated = bool(terminated), bool(truncated)
+            if slot.done:
+                ended.append(i)
+            elif self.task == "decision":
+                slot.chain.advance(action, slot.held, len(slot.targets))
+        return ended
+
+    def play(self, episodes: list[tuple[EpisodeKey, int]], decide: Decide | None,
+             on_step: Callable[[SkillHierarchy], None] | None = None) -> Iterator[tuple[EpisodeKey, dict[str, Any]]]:
+        """Play ``episodes`` ((key, reset seed) pairs) over the slots, each slot taking the next queued episode
+        when its own ends; yield (key, ``Slot.outcome``) as each ends. ``decide`` chooses the full task's objects;
+        ``on_step`` sees the hierarchy after every observation (e.g. a video recorder)."""
+        queue = list(episodes)
+        for i in range(len(self.slots)):
+            self._next(i, queue)
+        while any(s.active for s in self.slots):
+            belief = self.observe()
+            if on_step is not None:
+                on_step(self)
+            due = self.due()
+            if due:
+                slots = [self.slots[i] for i in due]
+                choices = decide(belief.take(np.array(due)), np.array([s.held for s in slots]),
+                                 np.stack([s.targets for s in slots]), np.array([s.chain.index for s in slots]))
+                for i, choice in zip(due, choices, strict=True):
+                    self.decide(i, choice)
+            for i in self.step():
+                yield self.slots[i].key, self.slots[i].outcome()
+                self._next(i, queue)
+
+    def _next(self, i: int, queue: list[tuple[EpisodeKey, int]]) -> None:
+        if queue:
+            key, seed = queue.pop(0)
+            self.start(i, seed, key)
+        else:
+            self.stop(i)
+
+    def _goal(self, slot: Slot, skill: str) -> np.ndarray:
+        return slot.chain.goal(slot.targets) if self.task == "decision" else task_goal(slot.observation, skill)
+
+    def _act(self, active: list[int]) -> dict[int, int]:
+        """Each active slot's next primitive action: one batched forward per skill."""
+        actions: dict[int, int] = {}
+        for skill in ("pick", "drop"):
+            group = [i for i in active if (self.slots[i].chain.task if self.task == "decision" else self.task) == skill]
+            if not group:
+                continue
+            slots = [self.slots[i] for i in group]
+            inputs = self.encode(skill, [s.observation for s in slots], [s.info for s in slots],
+                                 self.belief.take(np.array(group)), np.stack([self._goal(s, skill) for s in slots]),
+                                 self.arena)
+            masks = np.stack([skill_mask(skill)] * len(group))
+            chosen = self.skills[skill].act_batch(inputs, masks, [s.rng for s in slots])
+            actions.update(zip(group, (int(a) for a in chosen), strict=True))
+        return actions
+
+
 class HierarchicalRearrange(gym.Env):
-    """The decision policy's environment: ``MOR/Rearrange-v0`` seen one decision at a time.
+    """The decision policy's environment: ``MOR/Rearrange-v0`` seen one decision at a time, a ``SkillHierarchy`` of
+    one slot.
 
     observation_space: Box (D,) the ``decision`` layout of ``mor.policy.features``; action_space: Discrete(n),
     the object to rearrange next. ``info`` carries the full task's ``metrics`` at the end and
-    ``primitive_steps``, the environment steps this decision took. ``encode``: what the skills read (default: the
-    pose policies' ``pose_inputs``; a baseline's ``mor.policy.baselines.baseline_inputs``).
+    ``primitive_steps``, the environment steps this decision took. ``tracker``: a tracker of one environment.
+    ``encode``: what the skills read (default: the pose policies' ``pose_inputs``; a baseline's
+    ``mor.policy.baselines.baseline_inputs``).
     """
 
     metadata = {"render_modes": []}
 
-    def __init__(self, env: gym.Env, tracker: Tracker, pick: Skill, drop: Skill, uncertainty: bool = True,
+    def __init__(self, env: gym.Env, tracker: BatchTracker, pick: Skill, drop: Skill, uncertainty: bool = True,
                  encode: Encode | None = None) -> None:
         if not isinstance(env.unwrapped, RearrangeEnv):
             raise TypeError(f"HierarchicalRearrange needs MOR/Rearrange-v0, got {type(env.unwrapped).__name__}")
-        self.env, self.tracker, self.skills = env, tracker, {"pick": pick, "drop": drop}
-        self.uncertainty = uncertainty
-        self.encode = encode or pose_inputs(uncertainty)
+        self.env, self.uncertainty = env, uncertainty
+        self.hierarchy = SkillHierarchy([env], tracker, {"pick": pick, "drop": drop}, encode or pose_inputs(uncertainty),
+                                        "decision")
+        self.slot = self.hierarchy.slots[0]
         self.n_objects = env.unwrapped.config.n_objects
         self.observation_space = observation_space("decision", self.n_objects, uncertainty)
         self.action_space = spaces.Discrete(self.n_objects)
-        self.chain = SkillChain()
-        self.skill_rng = np.random.default_rng()
-        self._observation: dict[str, Any] = {}
-        self._info: dict[str, Any] = {}
-        self.belief: PoseBelief | None = None
-        self.on_step: Callable[[HierarchicalRearrange], None] | None = None  # e.g. a video recorder
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
-        if seed is not None:
-            self.skill_rng = np.random.default_rng(seed)  # the skills' draws, as in mor.eval.lockstep
-        self._observation, self._info = self.env.reset(seed=seed, options=options)
-        self.belief = self.tracker.start(self._observation, self._info)
-        self.chain = SkillChain()
-        self._notify()
-        return self._decision_vector(), self._info
+        self.hierarchy.start(0, seed, options=options)
+        self.hierarchy.observe()
+        return self._decision_vector(), self.slot.info
 
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if isinstance(action, bool | np.bool_) or not self.action_space.contains(action):
             raise ValueError(f"decision {action!r} is not an object index in [0, {self.n_objects})")
-        self.chain.decide(int(action), self.held, self.n_objects)
+        self.hierarchy.decide(0, int(action))
         total, steps = 0.0, 0
         while True:
-            task = self.chain.task
-            inputs = self.encode(task, [self._observation], [self._info], self.belief,
-                                 self.chain.goal(self.targets)[None], self.env.unwrapped.arena)
-            primitive = int(self.skills[task].act_batch(inputs, skill_mask(task)[None], [self.skill_rng])[0])
-            self._observation, reward, terminated, truncated, self._info = self.env.step(primitive)
-            self.belief = self.tracker.update(self._observation, self._info, primitive)
-            self._notify()
-            total, steps = total + float(reward), steps + 1
-            if terminated or truncated or self.chain.advance(primitive, self.held, self.n_objects):
-                info = {**self._info, "primitive_steps": steps}
-                return self._decision_vector(), total, terminated, truncated, info
+            self.hierarchy.step()
+            self.hierarchy.observe()
+            total, steps = total + self.slot.reward, steps + 1
+            if self.slot.done or self.slot.chain.task is None:
+                info = {**self.slot.info, "primitive_steps": steps}
+                return self._decision_vector(), total, self.slot.terminated, self.slot.truncated, info
 
     def action_masks(self) -> np.ndarray:
         """(n,) bool: ``decision_mask`` of the current belief (objects believed placed are not chosen again)."""
-        return decision_mask(self.belief.object_mean[0], self.targets)
+        return decision_mask(self.belief.object_mean[0], self.slot.targets)
 
     def close(self) -> None:
         self.env.close()
 
     @property
-    def observation(self) -> dict[str, Any]:
-        """The full task's latest raw observation (``image`` when the env renders frames)."""
-        return self._observation
-
-    @property
-    def targets(self) -> np.ndarray:
-        """(n, 2) every object's target position, metres (the full task's goal)."""
-        return np.asarray(self._observation["target_positions"])
-
-    @property
-    def held(self) -> int:
-        """The held object's index, n when none (the env's convention)."""
-        return int(self._observation["held"])
+    def belief(self) -> PoseBelief:
+        """The tracker's belief after the latest primitive step (batch 1)."""
+        return self.hierarchy.belief
 
     def _decision_vector(self) -> np.ndarray:
-        """The decision's observation (D,) (the skills read ``encode``'s)."""
-        return observation_vector(self.belief, np.array([self.held]), "decision", self.targets[None], self.uncertainty,
-                                  self.env.unwrapped.arena)[0]
-
-    def _notify(self) -> None:
-        if self.on_step is not None:
-            self.on_step(self)
+        return observation_vector(self.belief, np.array([self.slot.held]), "decision", self.slot.targets[None],
+                                  self.uncertainty, self.hierarchy.arena)[0]

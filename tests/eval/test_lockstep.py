@@ -72,8 +72,8 @@ def _one_at_a_time(task: str, seed: int, tracker, policies: TrainedPolicies, met
     else:
         env = make_policy_env("decision", SIM, tracker, True, (policies.pick, policies.drop), horizon=HORIZON)
         decide = decider(METHODS[method], policies, ARENA)
-        act = lambda vector: int(decide(env.belief, np.array([env.held]), env.targets[None],
-                                            np.array([env.chain.index]))[0])  # noqa: E731
+        act = lambda vector: int(decide(env.belief, np.array([env.slot.held]), env.slot.targets[None],
+                                            np.array([env.slot.chain.index]))[0])  # noqa: E731
     vector, _ = env.reset(seed=seed)
     total, steps = 0.0, 0
     while True:

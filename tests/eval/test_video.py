@@ -16,7 +16,7 @@ from mor.policy.baselines import BASELINE_INPUTS, BaselineExtractor, BaselineObs
 from mor.policy.envs import make_task_env
 from mor.policy.hierarchy import Skill
 from mor.policy.names import BASELINE_VARIANTS
-from mor.policy.observations import RenderingTruthTracker, SingleTracker
+from mor.policy.observations import RenderingTruthTracker
 from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
 
@@ -41,9 +41,9 @@ def test_a_baselines_video_plays_the_episode_its_evaluation_plays(variant: str, 
     pick, drop = _skill("pick", variant, sim), _skill("drop", variant, sim)
     decide = decider(method, None, Arena.build(sim.arena, sim.arena_size))
     out = tmp_path / "episode.gif"
-    metrics = write_policy_video(out, sim, SingleTracker(RenderingTruthTracker()), pick, drop, decide, True, seed=5,
-                                 horizon=HORIZON, encode=method_inputs(method))
-    assert iio.imread(out, index=None).shape[0] == HORIZON + 1
+    metrics = write_policy_video(out, sim, RenderingTruthTracker(), {"pick": pick, "drop": drop}, decide,
+                                 method_inputs(method), seed=5, horizon=HORIZON)
+    assert iio.imread(out, index=None).shape[0] == HORIZON + 1  # a frame before each step and one after the last
     (_, played), = play_lockstep("rearrange", [("key", 5)], sim, RenderingTruthTracker(), {"pick": pick, "drop": drop},
                                  decide, method_inputs(method), n_envs=1, horizon=HORIZON)
     assert metrics == played["metrics"]

@@ -71,7 +71,7 @@ def test_the_nearest_rule_with_oracle_skills_solves_the_task() -> None:
     for seed in range(3):
         env.reset(seed=seed)
         while True:
-            pick.goal = nearest_unfixed(env.belief, env.targets)
+            pick.goal = nearest_unfixed(env.belief, env.slot.targets)
             _, _, terminated, truncated, info = env.step(pick.goal)
             if terminated or truncated:
                 solved += info["metrics"]["success"]
