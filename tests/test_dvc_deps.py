@@ -128,3 +128,32 @@ def test_the_rule_finds_a_stage_module_and_what_it_imports() -> None:
     assert {"pipelines/sim_oracle.py", "mor/config.py", "mor/__init__.py"} <= files
     assert "pipelines/cli.py" not in files
     assert not _covers("mor/sim", "mor/simulation.py") and _covers("mor/sim/", "mor/sim/env.py")
+
+
+def _tracked() -> set[str]:
+    import subprocess
+
+    listed = subprocess.run(["git", "ls-files"], cwd=REPO_ROOT, capture_output=True, text=True, check=True).stdout
+    return set(listed.splitlines())
+
+
+def _outputs(stage: dict[str, Any]) -> list[str]:
+    """A stage's outs, metrics and plots, as paths."""
+    found = []
+    for key in ("outs", "metrics", "plots"):
+        for item in stage.get(key) or []:
+            found.append(next(iter(item)) if isinstance(item, dict) else item)
+    return found
+
+
+def test_every_dep_is_committed_or_made_by_another_stage() -> None:
+    """A fresh clone's `dvc repro` finds every dep: a committed file or folder, or another stage's output."""
+    stages, tracked = _stages(), _tracked()
+    made = {out: name for name, stage in stages.items() for out in _outputs(stage)}
+    for name, stage in stages.items():
+        for dep in stage.get("deps") or []:
+            committed = dep in tracked or any(path.startswith(dep.rstrip("/") + "/") for path in tracked)
+            producer = made.get(dep) or next((made[out] for out in made if dep.startswith(out.rstrip("/") + "/")),
+                                             None)
+            assert committed or (producer is not None and producer != name), (
+                f"dvc.yaml stage {name}: dep {dep} is neither committed nor an output of another stage")
