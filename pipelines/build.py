@@ -11,7 +11,7 @@ from mor.data.manifest import build_manifest, listed_files, manifest_version, wr
 from mor.locking import writer_lock
 from mor.timing import timed
 from pipelines import paths
-from pipelines.collect import profile_shape
+from pipelines.shapes import profile_shape
 from pipelines.io import write_json
 
 

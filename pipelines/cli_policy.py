@@ -134,7 +134,7 @@ def bench_policy_command(
     and lnet, all in one run (the profile's pick PPO settings; the committed L-Net)."""
     from mor.policy.bench import bench_policy  # noqa: PLC0415
     from pipelines.io import write_json  # noqa: PLC0415
-    from pipelines.train_policy import lnet_runner  # noqa: PLC0415
+    from pipelines.committed_lnet import lnet_runner  # noqa: PLC0415
 
     config = load_profile(profile, params)
     result = bench_policy(config.sim, config.policy.pick, lnet_runner("lnet", config), seconds, repeats)

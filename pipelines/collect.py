@@ -6,31 +6,13 @@ import json
 from pathlib import Path
 from typing import Any
 
-from mor.config import PROFILES, Profile, load_profile
-from mor.data.collect import CollectionSpec, ProfileShape, collect
+from mor.config import Profile
+from mor.data.collect import collect
 from mor.errors import ConfigError
 from mor.locking import writer_lock
 from pipelines import paths
 from pipelines.io import write_json
-
-
-def collection_spec(profile: Profile) -> CollectionSpec:
-    """The collection parameters of ``profile``."""
-    params = profile.collect
-    return CollectionSpec(profile.sim, params.exploration, params.seed, params.episode_steps, params.fps)
-
-
-def profile_shape(profile: Profile) -> ProfileShape:
-    """``profile``'s data-shaping params, named after the params.yaml profile equal to it (for messages), with the
-    other named profiles' (to suggest the one a mismatched file was made with)."""
-    named = {}
-    for name in PROFILES:
-        try:
-            named[name] = load_profile(name)
-        except ConfigError:
-            continue
-    own = next((name for name, other in named.items() if other == profile), "")
-    return ProfileShape(collection_spec(profile), own, tuple((n, collection_spec(p)) for n, p in named.items()))
+from pipelines.shapes import collection_spec, profile_shape
 
 
 def rejected_files(report: Path | None, out_dir: Path) -> set[str]:

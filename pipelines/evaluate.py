@@ -31,7 +31,7 @@ from mor.sim.arena import Arena
 from pipelines import paths, settings
 from pipelines.compute import update_compute
 from pipelines.io import write_json
-from pipelines.train_policy import lnet_runner
+from pipelines.committed_lnet import lnet_runner
 
 
 def policy_root(profile: Profile, zero_shot: bool) -> Path:

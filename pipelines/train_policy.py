@@ -24,22 +24,9 @@ from mor.policy.signature import PolicySignature, read_signature
 from mor.policy.train import train_policy
 from pipelines import paths
 from pipelines.io import write_json
+from pipelines.committed_lnet import lnet_runner
 
 PUBLISHED = (POLICY_FILE, "meta.json", "summary.json", "log.csv", "learning_curve.png")  # the last two if trained
-
-
-def lnet_runner(variant: Variant, profile: Profile) -> Any:
-    """The committed L-Net (``cards/lnet/model.pt`` + calibration; the main workspace's where the setting says
-    ``lnet_from_main``; compiled when the profile's ``lnet.compile_step``, with its ``lnet.encoder_precision``) for the L-Net variants; None for
-    gt_pose."""
-    if variant == "gt_pose":
-        return None
-    from mor.lnet.runtime import load_lnet  # noqa: PLC0415 - torch model only where needed
-
-    from_main = profile.setting is not None and profile.setting.lnet_from_main
-    return load_lnet((paths.MAIN / paths.LNET_CARD if from_main else paths.LNET_CARD) / "model.pt",
-                     compiled=profile.lnet.compile_step, data_association=profile.lnet.data_association,
-                     encoder_precision=profile.lnet.encoder_precision)
 
 
 def publish(run_dir: Path, card_dir: Path) -> None:

@@ -7,7 +7,7 @@ from mor.data.manifest import read_manifest
 from mor.data.validate import ValidationReport, validate
 from mor.timing import timed
 from pipelines import paths
-from pipelines.collect import profile_shape
+from pipelines.shapes import profile_shape
 from pipelines.io import write_json
 
 

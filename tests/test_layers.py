@@ -1,4 +1,4 @@
-"""The layering of docs/design.md: data flows sim -> data -> lnet -> policy -> eval, and nothing in ``mor/``
+"""The layering of docs/design.md: data flows sim -> data -> lnet -> policy -> eval -> robot, and nothing in ``mor/``
 imports ``pipelines/`` (the wiring, the command line included, sits above the library)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import pytest
 from repo_imports import direct_imports, imports_of_tree, repo_modules
 
 #: The library's layers, lowest first; a module may import only its own layer and lower ones.
-LAYERS: tuple[str, ...] = ("sim", "data", "lnet", "policy", "eval")
+LAYERS: tuple[str, ...] = ("sim", "data", "lnet", "policy", "eval", "robot")
 
 
 def _layer(module: str) -> int | None:
@@ -39,3 +39,17 @@ def test_the_rule_catches_a_pipelines_import() -> None:
     assert imports_of_tree(ast.parse(code), "mor.sim.env") >= {"pipelines", "pipelines.paths", "pipelines.io"}
     relative = imports_of_tree(ast.parse("from ..data import collect\n"), "mor.sim.env")
     assert "mor.data.collect" in relative
+
+
+#: pipelines/ modules that are shared wiring or the command line, not stages (any stage may import them)
+PIPELINE_HELPERS = frozenset({"pipelines", "pipelines.paths", "pipelines.io", "pipelines.lnet_io", "pipelines.committed_lnet",
+                              "pipelines.shapes",
+                              "pipelines.settings", "pipelines.compute", "pipelines.cli", "pipelines.cli_policy",
+                              "pipelines.cli_robot"})
+STAGES = sorted(m for m in repo_modules() if m.split(".")[0] == "pipelines" and m not in PIPELINE_HELPERS)
+
+
+@pytest.mark.parametrize("module", STAGES)
+def test_no_stage_module_imports_another(module: str) -> None:
+    others = sorted(m for m in direct_imports(module) if m in STAGES and m != module)
+    assert not others, f"{module} imports the stage modules {others}: move what they share to a helper module"

@@ -36,7 +36,17 @@ from mor.data.card_figures import (
 )
 from mor.data.card_stats import COVERAGE_CELL, CardStats, compute_stats, describe, plain
 from mor.data.manifest import SPLITS
-from mor.data.schema import MAX_OBJECTS, lerobot_features
+from mor.data.schema import (
+    ACTION,
+    AGENT_POSE,
+    GROUND_TRUTH,
+    IMAGE,
+    MAX_OBJECTS,
+    OBJECT_VISIBLE,
+    OBSERVATION,
+    STATE,
+    features,
+)
 from mor.sim.arena import Arena
 from mor.sim.catalog import N_CLASSES
 from mor.sim.rules import AGENT_RADIUS, Action
@@ -48,20 +58,6 @@ TEXTURE_PNG = "wall_textures.png"
 FRAMES_PNG = "example_frames.png"
 LICENSE = "apache-2.0"
 TAGS: tuple[str, ...] = ("LeRobot", "mor", "mobile-manipulation", "localization", "mujoco")
-
-#: Units and meaning of each LeRobot feature (``mor.data.schema.lerobot_features``).
-FEATURE_UNITS: dict[str, tuple[str, str]] = {
-    "observation.image": ("uint8 RGB", "first-person camera image"),
-    "observation.object_classes": ("class id", "class of each object slot, -1 for an empty slot"),
-    "observation.held": ("object index", "index of the held object, -1 when none"),
-    "observation.target_positions": ("m, world frame", "target (x, y) of each object slot, 0 for an empty slot"),
-    "state.agent_pose": ("m, m, rad; world frame", "ground-truth agent pose (x, y, heading)"),
-    "state.object_positions": ("m, world frame", "ground-truth (x, y) of each object slot (held: the agent's)"),
-    "state.object_visible": ("0 / 1", "object slot in view by `mor.sim.rules.visible` (0 when held or empty)"),
-    "action": ("action id", "action taken after this frame: 0 MOVE, 1 TURN_LEFT, 2 TURN_RIGHT, 3 PICK, 4 DROP; "
-                            "-1 on an episode's last frame"),
-}
-
 
 def size_category(n: int) -> str:
     """The Hub's ``size_categories`` bucket of ``n`` examples (frames)."""
@@ -107,7 +103,7 @@ def _event_section(stats: CardStats) -> list[str]:
     ]
     lines = ["## Events", "",
              "Per episode. Actions are what the random-action scheme chose; picks and drops are the changes of "
-             "`observation.held` between consecutive frames.", "",
+             f"the held object (in `{STATE}`) between consecutive frames.", "",
              "| per episode | mean | median | min | max | total |", "| --- | ---: | ---: | ---: | ---: | ---: |"]
     for name, values in quantities:
         d = describe(values)
@@ -212,9 +208,11 @@ def render_card(stats: CardStats, params: dict[str, Any], datasets_root_rel: str
         lines += [f"Per frame (LeRobot features; objects padded to {MAX_OBJECTS} slots; positions flattened "
                   "x0, y0, x1, y1, ...). World frame: metres, radians, counter-clockwise from +x.", "",
                   "| feature | dtype | shape | units | meaning |", "| --- | --- | --- | --- | --- |"]
-        for name, spec in lerobot_features(stats.image_size).items():
-            units, meaning = FEATURE_UNITS.get(name, ("", ""))
-            lines.append(f"| `{name}` | {spec['dtype']} | {tuple(spec['shape'])} | {units} | {meaning} |")
+        for name, feature in features(stats.image_size).items():
+            lines.append(f"| `{name}` | {feature.dtype} | {feature.shape} | {feature.units} | {feature.meaning} |")
+        lines += ["", f"`{OBSERVATION}.*` is what an agent that sees only the camera is given (`{IMAGE}`, `{STATE}` "
+                  f"and `{ACTION}` are the names LeRobot's policies read); `{GROUND_TRUTH}.*` is the simulator's "
+                  "truth, which such an agent does not observe (the L-Net's training labels)."]
     else:
         lines.append("No episode image could be read, so the image size (and the feature shapes) is unknown.")
     lines += [""] + _event_section(stats) + ["", "## Coverage", ""]
@@ -239,7 +237,7 @@ def render_card(stats: CardStats, params: dict[str, Any], datasets_root_rel: str
         lines += ["## Visibility", "",
                   "Per frame, which objects the camera sees by the simulator's rule (`mor.sim.rules.visible`: in the "
                   "60° field of view and not occluded; a held object is not in view), stored as "
-                  "`state.object_visible`.", "",
+                  f"`{OBJECT_VISIBLE}`.", "",
                   f"- An object is in view on {100 * v.object_frame_share:.1f}% of its frames; some object is in view "
                   f"on {100 * v.any_frame_share:.1f}% of all frames.",
                   f"- {100 * v.never_seen_share:.1f}% of the objects are never in view during their episode.",
@@ -277,7 +275,8 @@ def render_card(stats: CardStats, params: dict[str, Any], datasets_root_rel: str
         "from lerobot.datasets.lerobot_dataset import LeRobotDataset",
         "",
         f'dataset = LeRobotDataset("mor/{first}", root="{posixpath.normpath(posixpath.join(root, first))}")',
-        'frame = dataset[0]  # dict of tensors: "observation.image", "state.agent_pose", ...',
+        f'frame = dataset[0]  # dict of tensors: "{IMAGE}" (3, H, W) float32 in [0, 1], "{STATE}", "{ACTION}", '
+        f'"{AGENT_POSE}", ...',
         "```", "",
         "or the Parquet frames alone (images as PNG bytes), with `datasets`:", "",
         "```python",

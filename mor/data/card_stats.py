@@ -305,7 +305,7 @@ def coverage_stats(summaries: Sequence[EpisodeSummary], arena: Arena, cell_size:
 
 @dataclass(frozen=True)
 class VisibilityStats:
-    """How often the objects are in view (``mor.sim.rules.visible``, the dataset's ``state.object_visible``)."""
+    """How often the objects are in view (``mor.sim.rules.visible``, the dataset's ``ground_truth.object_visible``)."""
 
     object_frame_share: float  # share of (frame, object) pairs with the object in view
     any_frame_share: float  # share of frames with at least one object in view

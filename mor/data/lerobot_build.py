@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import json
 import logging
@@ -10,6 +11,7 @@ import multiprocessing as mp
 import os
 import shutil
 import tempfile
+import types
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,10 +28,11 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 logging.getLogger("lerobot.utils.import_utils").setLevel(logging.ERROR)
 
 from mor.atomic import atomic_folder, remove_if_orphaned  # noqa: E402
+from mor.data import schema  # noqa: E402
 from mor.data.episode_io import EpisodeData, read_episode  # noqa: E402
 from mor.data.manifest import SPLITS  # noqa: E402
-from mor.data.observations import pad_classes  # noqa: E402
-from mor.data.schema import MAX_OBJECTS, lerobot_features  # noqa: E402
+from mor.data.observations import observation_state, pad_classes  # noqa: E402
+from mor.data.schema import MAX_OBJECTS, NO_ACTION, lerobot_features  # noqa: E402
 from mor.data.visibility import visible_per_frame  # noqa: E402
 
 TASK_TEXT = "rearrange the objects to their targets"
@@ -50,16 +53,18 @@ def episode_frames(episode: EpisodeData) -> list[dict[str, np.ndarray | str]]:
     classes = pad_classes(header.object_classes)
     targets = _padded(np.asarray(header.target_positions), 0.0, np.float32)
     visible = visible_per_frame(episode.agent_poses, episode.object_positions, episode.held)
+    actions = np.asarray(episode.actions, np.int64)
+    state = observation_state(episode.held, np.r_[NO_ACTION, actions[:-1]])
     return [
         {
-            "observation.image": episode.images[t],
-            "observation.object_classes": classes,
-            "observation.held": np.array([episode.held[t]], np.int64),
-            "observation.target_positions": targets,
-            "state.agent_pose": episode.agent_poses[t].astype(np.float32),
-            "state.object_positions": _padded(episode.object_positions[t], 0.0, np.float32),
-            "state.object_visible": _padded(visible[t], 0, np.int64),
-            "action": np.array([episode.actions[t]], np.int64),
+            schema.IMAGE: episode.images[t],
+            schema.STATE: state[t],
+            schema.OBJECT_CLASSES: classes,
+            schema.TARGET_POSITIONS: targets,
+            schema.AGENT_POSE: episode.agent_poses[t].astype(np.float32),
+            schema.OBJECT_POSITIONS: _padded(episode.object_positions[t], 0.0, np.float32),
+            schema.OBJECT_VISIBLE: _padded(visible[t], 0, np.int64),
+            schema.ACTION: actions[t:t + 1],
             "task": TASK_TEXT,
         }
         for t in range(episode.n_frames)
@@ -94,6 +99,45 @@ def batched_image_embedding() -> Iterator[None]:
     finally:
         for module, original in originals.items():
             module.embed_images = original
+
+
+#: The loggers of the libraries a build drives; during a build they pass errors only (``quiet_libraries``).
+LIBRARY_LOGGERS: tuple[str, ...] = ("lerobot", "datasets")
+
+
+@contextlib.contextmanager
+def quiet_libraries() -> Iterator[None]:
+    """Within the block, lerobot and Hugging Face ``datasets`` draw no progress bars of their own and log errors
+    only, so that a build shows one bar per step, its own.
+
+    Without it, lerobot's aggregation draws "Validate all meta data" and "Copy data and videos" per split, and
+    ``datasets`` a "Generating train split" and a "Map" bar per shard (named "train" whatever the split).
+    ``datasets.utils.logging.disable_progress_bar`` alone does not hold: lerobot 0.6.1 wraps each Parquet load in
+    its ``SuppressProgressBars``, which turns ``datasets``' bars back on when it exits, so within the block that
+    wrapper does nothing (the bars are off already). Errors still reach the log, and exceptions pass through
+    unchanged. Everything is restored on leaving the block.
+    """
+    from datasets.utils import logging as datasets_logging  # noqa: PLC0415 - heavy import
+    from lerobot.datasets import aggregate, io_utils  # noqa: PLC0415 - heavy import
+
+    bars_were_enabled = datasets_logging.is_progress_bar_enabled()
+    levels = {name: logging.getLogger(name).level for name in LIBRARY_LOGGERS}
+    originals = {(aggregate, "tqdm"): aggregate.tqdm,
+                 (io_utils, "SuppressProgressBars"): io_utils.SuppressProgressBars}
+    datasets_logging.disable_progress_bar()
+    for name in LIBRARY_LOGGERS:
+        logging.getLogger(name).setLevel(logging.ERROR)
+    aggregate.tqdm = types.SimpleNamespace(tqdm=functools.partial(tqdm, disable=True))  # it calls tqdm.tqdm(...)
+    io_utils.SuppressProgressBars = contextlib.nullcontext
+    try:
+        yield
+    finally:
+        for (module, name), original in originals.items():
+            setattr(module, name, original)
+        for name, level in levels.items():
+            logging.getLogger(name).setLevel(level)
+        if bars_were_enabled:
+            datasets_logging.enable_progress_bar()
 
 
 def sort_stats(root: Path) -> None:
@@ -198,11 +242,9 @@ class ShardJob:
 
 def _build_shard(job: ShardJob, image_size: int, fps: float) -> int:
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
-    from datasets.utils.logging import disable_progress_bar  # noqa: PLC0415
-
-    disable_progress_bar()  # one bar per episode from lerobot's internals drowns ours
-    write_lerobot_dataset(list(job.files), job.root, f"mor/{job.split}-shard{job.index:03d}", job.stamp,
-                          image_size, fps)
+    with quiet_libraries():  # one bar per episode from lerobot's internals would drown ours
+        write_lerobot_dataset(list(job.files), job.root, f"mor/{job.split}-shard{job.index:03d}", job.stamp,
+                              image_size, fps)
     return len(job.files)
 
 
@@ -222,6 +264,22 @@ def _shard_jobs(split: str, files: list[Path], hashes: list[str], shards_dir: Pa
     return jobs
 
 
+def _aggregate_split(split_root: Path, split: str, jobs: list[ShardJob], stamp: dict) -> None:
+    """Join the shards ``jobs`` of ``split`` into one LeRobot dataset at ``split_root``, stamped with ``stamp``."""
+    from lerobot.datasets.aggregate import aggregate_datasets  # noqa: PLC0415 - heavy import
+
+    with atomic_folder(split_root) as folder:
+        if jobs:
+            folder.rmdir()  # lerobot makes the folder it aggregates into
+            # One Parquet file per shard: concatenating image tables re-reads and rewrites the growing file
+            # for every shard (quadratic), while a new file per shard is linear and loads the same way.
+            with batched_image_embedding():
+                aggregate_datasets([f"mor/{split}-shard{job.index:03d}" for job in jobs], f"mor/{split}",
+                                   roots=[job.root for job in jobs], aggr_root=folder, concatenate_data=False)
+            sort_stats(folder)
+        (folder / BUILD_STAMP).write_text(json.dumps(stamp) + "\n")
+
+
 def build_splits(
     manifest: list[dict], episodes_root: Path, out_root: Path, version: str, image_size: int, fps: float,
     workers: int, shard_episodes: int = 100, progress: bool = True,
@@ -231,20 +289,20 @@ def build_splits(
     Each split is built in shards of ``shard_episodes`` episodes, in ``workers`` processes, then aggregated with
     lerobot's ``aggregate_datasets``. Finished shards and splits of the same version are kept, so an interrupted
     build resumes where it stopped; scratch folders that killed builds left behind are deleted first
-    (``remove_stale_scratch``).
+    (``remove_stale_scratch``). With ``progress``, one bar per step (``build``: episodes written into shards;
+    ``aggregate``: shards joined into splits), and none of lerobot's or ``datasets``' own (``quiet_libraries``).
     """
-    from lerobot.datasets.aggregate import aggregate_datasets  # noqa: PLC0415 - heavy import
-
     remove_stale_scratch()
 
     shards_dir = out_root / ".shards"
     counts: dict[str, int] = {}
+    stamps: dict[str, dict] = {}
     jobs_by_split: dict[str, list[ShardJob]] = {}
     for split in SPLITS:
         rows = [row for row in manifest if row["split"] == split]
         counts[split] = len(rows)
-        split_stamp = {"dataset_version": version, "split": split, "episodes": len(rows)}
-        if _stamp(out_root / split) == split_stamp:
+        stamps[split] = {"dataset_version": version, "split": split, "episodes": len(rows)}
+        if _stamp(out_root / split) == stamps[split]:
             continue
         files = [episodes_root / row["file"] for row in rows]
         jobs_by_split[split] = _shard_jobs(split, files, [row["sha256"] for row in rows], shards_dir,
@@ -260,19 +318,14 @@ def build_splits(
             with mp.get_context("spawn").Pool(min(workers, len(pending))) as pool:
                 for done in pool.imap_unordered(_build_shard_job, [(job, image_size, fps) for job in pending]):
                     bar.update(done)
-    for split, jobs in jobs_by_split.items():
-        split_root = out_root / split
-        split_stamp = {"dataset_version": version, "split": split, "episodes": counts[split]}
-        with atomic_folder(split_root) as folder:
-            if jobs:
-                folder.rmdir()  # lerobot makes the folder it aggregates into
-                # One Parquet file per shard: concatenating image tables re-reads and rewrites the growing file
-                # for every shard (quadratic), while a new file per shard is linear and loads the same way.
-                with batched_image_embedding():
-                    aggregate_datasets([f"mor/{split}-shard{job.index:03d}" for job in jobs], f"mor/{split}",
-                                       roots=[job.root for job in jobs], aggr_root=folder, concatenate_data=False)
-                sort_stats(folder)
-            (folder / BUILD_STAMP).write_text(json.dumps(split_stamp) + "\n")
-        shutil.rmtree(shards_dir / split, ignore_errors=True)
+                pool.close()  # let the workers exit on their own: terminated ones leak their tqdm locks' semaphores
+                pool.join()
+    with (quiet_libraries(), tqdm(total=sum(len(jobs) for jobs in jobs_by_split.values()), desc="aggregate",
+                                  unit="shard", disable=not progress or not jobs_by_split) as bar):
+        for split, jobs in jobs_by_split.items():
+            bar.set_postfix_str(split)
+            _aggregate_split(out_root / split, split, jobs, stamps[split])
+            shutil.rmtree(shards_dir / split, ignore_errors=True)
+            bar.update(len(jobs))
     shutil.rmtree(shards_dir, ignore_errors=True)
     return counts

@@ -6,6 +6,8 @@
 |                |                                    | reads (3, H, W) float32 in [0, 1] = uint8 / 255              |
 | object classes | (n,) class ids                     | (MAX_OBJECTS,) int64, absent slots ``ABSENT_CLASS`` = -1     |
 | held           | index of the held object, n: none  | index of the held object, ``NOT_HELD`` = -1: none            |
+|                |                                    | (the dataset stores it one-hot in ``observation.state``:     |
+|                |                                    | ``observation_state`` / ``held_from_state``)                 |
 
 The environment's convention is Gymnasium's (spaces cannot hold -1); the dataset's is the one every recorded
 file, the L-Net and its evaluation use. ``env_to_network`` turns environment observations into the network's
@@ -20,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from mor.data.schema import MAX_OBJECTS
+from mor.data.schema import MAX_OBJECTS, NO_ACTION
+from mor.sim.rules import N_ACTIONS
 
 NOT_HELD = -1
 ABSENT_CLASS = -1
@@ -41,6 +44,25 @@ def held_from_env(held: np.ndarray | int, n_objects: int) -> np.ndarray:
     """The environment's held index (n when nothing is held) -> the dataset's (``NOT_HELD`` when none), int64."""
     held = np.asarray(held, np.int64)
     return np.where(held == n_objects, NOT_HELD, held)
+
+
+def observation_state(held: np.ndarray, previous_actions: np.ndarray) -> np.ndarray:
+    """The dataset's ``observation.state`` (``mor.data.schema.STATE_NAMES``) of T frames: held (T,) the dataset's
+    index (``NOT_HELD``: none), previous_actions (T,) the action taken before each frame (``NO_ACTION``: none) ->
+    (T, MAX_OBJECTS + N_ACTIONS) float32, the held slot one-hot then the previous action one-hot (all 0 for none)."""
+    held, previous_actions = np.asarray(held, np.int64), np.asarray(previous_actions, np.int64)
+    state = np.zeros((len(held), MAX_OBJECTS + N_ACTIONS), np.float32)
+    rows = np.arange(len(held))
+    state[rows[held != NOT_HELD], held[held != NOT_HELD]] = 1.0
+    moved = previous_actions != NO_ACTION
+    state[rows[moved], MAX_OBJECTS + previous_actions[moved]] = 1.0
+    return state
+
+
+def held_from_state(state: np.ndarray) -> np.ndarray:
+    """The held index (..., ) int64 (``NOT_HELD`` when none) of ``observation.state`` rows (..., MAX_OBJECTS + ...)."""
+    slots = np.asarray(state)[..., :MAX_OBJECTS]
+    return np.where(slots.any(axis=-1), slots.argmax(axis=-1), NOT_HELD).astype(np.int64)
 
 
 def images_to_tensor(images: np.ndarray) -> torch.Tensor:

@@ -9,19 +9,34 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import torch
 from torch.utils.data import Dataset
 
 from mor.data.episode_io import decode_png
-from mor.data.observations import images_to_tensor
-from mor.data.schema import MAX_OBJECTS
+from mor.data.observations import held_from_state, images_to_tensor
+from mor.data.schema import (
+    ACTION,
+    AGENT_POSE,
+    IMAGE,
+    MAX_OBJECTS,
+    OBJECT_CLASSES,
+    OBJECT_POSITIONS,
+    OBJECT_VISIBLE,
+    STATE,
+    TARGET_POSITIONS,
+)
 from mor.errors import ConfigError
 
-_COLUMNS = ("observation.image", "observation.object_classes", "observation.held", "observation.target_positions",
-            "state.agent_pose", "state.object_positions", "state.object_visible", "action", "episode_index",
-            "frame_index")
+_COLUMNS = (IMAGE, STATE, OBJECT_CLASSES, TARGET_POSITIONS, AGENT_POSE, OBJECT_POSITIONS, OBJECT_VISIBLE, ACTION,
+            "episode_index", "frame_index")
+
+
+def _stacked(table: pa.Table, column: str) -> np.ndarray:
+    """A fixed-length list column as one (rows, length) array."""
+    return np.stack(table[column].to_numpy(zero_copy_only=False))
 
 
 class SequenceWindows(Dataset):
@@ -47,21 +62,18 @@ class SequenceWindows(Dataset):
             raise ConfigError(f"{files[0]}: the dataset lacks {', '.join(missing)} (built by an older version); "
                               "rebuild it with mor build-dataset")
         self.table = pq.ParquetDataset(files).read(columns=list(_COLUMNS)).combine_chunks()
-        first_image = decode_png(pc.struct_field(self.table["observation.image"], "bytes")[0].as_py())
-        self.image_size = int(first_image.shape[0])
+        self._images = pc.struct_field(self.table[IMAGE], "bytes")
+        self.image_size = int(decode_png(self._images[0].as_py()).shape[0])
         episodes = self.table["episode_index"].to_numpy()
         self._labels = {
-            "agent_pose": np.stack(self.table["state.agent_pose"].to_numpy(zero_copy_only=False)).astype(np.float32),
-            "object_positions": np.stack(self.table["state.object_positions"].to_numpy(zero_copy_only=False))
-            .astype(np.float32).reshape(-1, MAX_OBJECTS, 2),
-            "visible": np.stack(self.table["state.object_visible"].to_numpy(zero_copy_only=False)).astype(bool),
-            "held": self.table["observation.held"].to_numpy().astype(np.int64),
-            "actions": self.table["action"].to_numpy().astype(np.int64),
+            "agent_pose": _stacked(self.table, AGENT_POSE).astype(np.float32),
+            "object_positions": _stacked(self.table, OBJECT_POSITIONS).astype(np.float32).reshape(-1, MAX_OBJECTS, 2),
+            "visible": _stacked(self.table, OBJECT_VISIBLE).astype(bool),
+            "held": held_from_state(_stacked(self.table, STATE)),
+            "actions": self.table[ACTION].to_numpy().astype(np.int64),  # shape (1,): lerobot stores a scalar
         }
-        self._classes = np.stack(self.table["observation.object_classes"].to_numpy(zero_copy_only=False))
-        self._targets = np.stack(self.table["observation.target_positions"].to_numpy(zero_copy_only=False)) \
-            .astype(np.float32).reshape(-1, MAX_OBJECTS, 2)
-        self._images = pc.struct_field(self.table["observation.image"], "bytes")
+        self._classes = _stacked(self.table, OBJECT_CLASSES)
+        self._targets = _stacked(self.table, TARGET_POSITIONS).astype(np.float32).reshape(-1, MAX_OBJECTS, 2)
         self._episodes = episodes
         self._frames = self.table["frame_index"].to_numpy()
         starts, lengths = [], []

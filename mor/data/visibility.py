@@ -1,7 +1,7 @@
 """Which objects the camera sees on each recorded frame, by the simulator's own rule (``mor.sim.rules.visible``).
 
 Derived from a frame's recorded state (agent pose, object positions, held index), so it can be computed for any
-episode file, simulated or real; the dataset stores it as ``state.object_visible``.
+episode file, simulated or real; the dataset stores it as ``ground_truth.object_visible``.
 """
 
 from __future__ import annotations

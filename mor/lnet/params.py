@@ -23,8 +23,8 @@ class LNetConfig(ParamsModel):
                             "Gaussian belief (mor.lnet.filter, our addition)")
     visibility: bool = Field(
         False, description="a per-object visibility head on the PoseNet (BCE against the dataset's "
-                           "state.object_visible), its ego object NLL scored only where the object is visible, and "
-                           "the tracker's measurement weighted by the predicted visibility (our addition)")
+                           "ground_truth.object_visible), its ego object NLL scored only where the object is "
+                           "visible, and the tracker's measurement weighted by the predicted visibility (our addition)")
     object_head: Literal["global", "attention"] = Field(
         "global", description="object positions from the image's global feature (the paper's MLP) or from the "
                               "cells of the encoder's map that each object's class attends to (our addition; "

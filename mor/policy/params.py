@@ -30,6 +30,8 @@ class PPOParams(ParamsModel):
     vf_coef: float = Field(0.5, ge=0)
     max_grad_norm: float = Field(0.5, gt=0)
     checkpoint_every: int = Field(50_000, ge=1, description="steps between resumable checkpoints")
+    device: Literal["cpu", "cuda", "auto"] = Field("cpu", description="where the PPO update runs; auto: CUDA when "
+                                                                      "there is one (the paper profile's ResNets)")
 
 
 class BaselineParams(ParamsModel):

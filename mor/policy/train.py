@@ -224,7 +224,7 @@ def train_policy(
     env = make_env()
     model = MaskablePPO(
         "MultiInputPolicy" if isinstance(env.observation_space, spaces.Dict) else "MlpPolicy", env, seed=seed,
-        device="cpu", verbose=0, policy_kwargs={"net_arch": list(params.hidden), **(policy_kwargs or {})},
+        device=params.device, verbose=0, policy_kwargs={"net_arch": list(params.hidden), **(policy_kwargs or {})},
         n_steps=params.n_steps, batch_size=params.batch_size, n_epochs=params.n_epochs,
         learning_rate=params.learning_rate, gamma=params.gamma, gae_lambda=params.gae_lambda,
         clip_range=params.clip_range, ent_coef=params.ent_coef, vf_coef=params.vf_coef,

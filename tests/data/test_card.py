@@ -25,6 +25,7 @@ from mor.data.card_stats import (
 from mor.data.collect import CollectionSpec, ProfileShape
 from mor.data.episode_io import EpisodeData, EpisodeHeader
 from mor.data.manifest import build_manifest, manifest_version, write_manifest
+from mor.data.schema import ACTION, AGENT_POSE, IMAGE, STATE, features
 from mor.sim.arena import Arena
 
 
@@ -121,7 +122,9 @@ def test_dataset_card_from_a_tiny_collection(tiny_collection: Path, tiny_spec: C
     fraction = float(re.search(r"coverage fraction of ([0-9.]+)", card).group(1))
     assert 0.0 < fraction <= 1.0
     size = tiny_spec.sim.image_size
-    assert f"| `observation.image` | image | ({size}, {size}, 3) |" in card  # the shape, read from the frames
+    assert f"| `{IMAGE}` | image | ({size}, {size}, 3) |" in card  # the shape, read from the frames
+    for name, feature in features(size).items():
+        assert f"| `{name}` | {feature.dtype} | {feature.shape} | {feature.units} | {feature.meaning} |" in card
     assert f"episode_steps: {tiny_spec.episode_steps}" in card  # the params block
     share = float(re.search(r"An object is in view on ([0-9.]+)% of its frames", card).group(1))
     assert 0.0 < share < 100.0
@@ -129,8 +132,10 @@ def test_dataset_card_from_a_tiny_collection(tiny_collection: Path, tiny_spec: C
 
 def test_card_configs_point_at_the_split_datasets(tiny_dataset: tuple[Path, Path, list[dict]],
                                                   tiny_collection: Path, tiny_spec: CollectionSpec,
-                                                  square_arena: Arena, tmp_path: Path) -> None:
-    """The front matter's data_files globs, resolved from the card's folder, find every split's frames."""
+                                                  square_arena: Arena, tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """The front matter's data_files globs, resolved from the card's folder, find every split's frames; the
+    card's LeRobot snippet, run in the card's folder, loads a frame with the features it names."""
     from datasets import load_dataset  # noqa: PLC0415 - heavy import
 
     manifest_path, datasets_root, rows = tiny_dataset
@@ -146,3 +151,9 @@ def test_card_configs_point_at_the_split_datasets(tiny_dataset: tuple[Path, Path
         frames = load_dataset("parquet", data_files=[str(f) for f in files], split="train",
                               cache_dir=str(tmp_path / "hf"))
         assert len(frames) == sum(r["n_frames"] for r in rows if r["split"] == config["config_name"])
+    snippet = re.search(r"```python\n(.*?)```", card, re.S).group(1)
+    assert "LeRobotDataset" in snippet and IMAGE in snippet
+    monkeypatch.chdir(out)
+    namespace: dict = {}
+    exec(snippet, namespace)  # noqa: S102 - the card's own example
+    assert {IMAGE, STATE, ACTION, AGENT_POSE} <= set(namespace["frame"])

@@ -234,7 +234,7 @@ def test_a_real_episode_of_another_image_size_is_refused(tiny_spec: CollectionSp
 
 
 def test_profile_shape_is_named_after_params_yaml(repo_root: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from pipelines.collect import profile_shape
+    from pipelines.shapes import profile_shape
 
     monkeypatch.chdir(repo_root)
     shape = profile_shape(load_profile("tiny"))

@@ -25,6 +25,7 @@ def test_windows_stay_inside_episodes_and_match_records(tiny_dataset: tuple, tin
     episode = read_episode(tiny_collection / train_rows[int(item["episode_index"])]["file"])
     np.testing.assert_allclose(item["agent_pose"].numpy(), episode.agent_poses[4:12], atol=1e-5)
     np.testing.assert_array_equal(item["actions"].numpy(), episode.actions[4:12])
+    np.testing.assert_array_equal(item["held"].numpy(), episode.held[4:12])  # read back from observation.state
     n = len(episode.header.object_classes)
     assert item["object_mask"].tolist() == [True] * n + [False] * (5 - n)
     batch = next(iter(DataLoader(windows, batch_size=3)))
