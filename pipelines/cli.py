@@ -259,6 +259,15 @@ def validate_command(profile: ProfileOption = None, params: ParamsOption = DEFAU
         raise typer.Exit(1)
 
 
+def parse_objects(object_classes: str, targets: str) -> tuple[list[int], list[tuple[float, ...]]]:
+    """``--object-classes 0,7 --targets '1,2;-1,0.5'`` -> ([0, 7], [(1.0, 2.0), (-1.0, 0.5)]); ConfigError if not."""
+    try:
+        return ([int(c) for c in object_classes.split(",")],
+                [tuple(float(v) for v in pair.split(",")) for pair in targets.split(";")])
+    except ValueError:
+        raise ConfigError("--object-classes/--targets: expected e.g. --object-classes 0,7 --targets '1,2;-1,0.5'") from None
+
+
 @app.command("import-real")
 def import_real_command(
     bag: Annotated[Path, typer.Argument(help="A ROS 2 rosbag2 recording: an .mcap file or its folder.")],
@@ -285,11 +294,7 @@ def import_real_command(
         "import-real", image=image_topic, agent_pose=agent_pose_topic, object_pose=object_pose_topic,
         action=action_topic or None, cmd_vel=cmd_vel_topic or None, held=held_topic or None,
     )
-    try:
-        classes = [int(c) for c in object_classes.split(",")]
-        target_list = [tuple(float(v) for v in pair.split(",")) for pair in targets.split(";")]
-    except ValueError:
-        raise ConfigError("--object-classes/--targets: expected e.g. --object-classes 0,7 --targets '1,2;-1,0.5'") from None
+    classes, target_list = parse_objects(object_classes, targets)
     import_params = make_import_params(
         "import-real", n_objects=len(classes), object_classes=classes, target_positions=target_list,
         episode_id=episode_id, fps=fps, image_size=image_size, timestamps=timestamps,
@@ -459,6 +464,7 @@ def bench_lnet(
 
 
 from pipelines import cli_policy  # noqa: E402,F401 - registers the `policy` and `eval` groups on `app`
+from pipelines import cli_robot  # noqa: E402,F401 - registers the `robot` group and `bench robot` on `app`
 
 
 def main() -> None:  # pragma: no cover - console entry point

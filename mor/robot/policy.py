@@ -1,0 +1,142 @@
+"""The robot's one door to the policy, evaluation and L-Net layers: a method's trained policies played as the
+evaluation plays them, the L-Net's streaming tracker, and the belief they exchange.
+
+Everything the controller takes from ``mor.policy``, ``mor.eval`` and ``mor.lnet`` is imported here and nowhere
+else in ``mor.robot``, so that when those modules move, this file alone changes.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from mor.errors import ConfigError
+from mor.eval.methods import METHODS, TrainedPolicies, method_spec
+from mor.eval.protocol import decider, play_records
+from mor.lnet.runtime import LNetRunner, load_lnet
+from mor.policy.belief import PoseBelief
+from mor.policy.features import observation_vector
+from mor.policy.hierarchy import SkillChain, skill_mask
+from mor.policy.lnet_tracking import LNetBatchTracker
+from mor.policy.observations import GroundTruthBatchTracker, has_uncertainty
+from mor.sim.arena import Arena
+from mor.sim.config import SimConfig
+
+#: The methods a robot can play: those that read a pose belief (the learned decision or the nearest rule).
+ROBOT_METHODS: tuple[str, ...] = tuple(name for name, spec in METHODS.items()
+                                       if spec.decision in ("learned", "nearest_rule"))
+
+
+def robot_method(name: str) -> str:
+    """``name`` if a robot can play it; ConfigError listing those it can otherwise."""
+    method_spec(name)
+    if name not in ROBOT_METHODS:
+        raise ConfigError(f"--method: {name!r} does not read a pose belief (a pixel baseline or a scripted policy); "
+                          f"choose one of {', '.join(ROBOT_METHODS)}")
+    return name
+
+
+def uses_lnet(method: str) -> bool:
+    """Whether ``method`` observes through the L-Net (its policies were trained on its estimates)."""
+    return method_spec(method).uses_lnet
+
+
+def truth_belief(agent_pose: np.ndarray, object_positions: np.ndarray) -> PoseBelief:
+    """A belief of one robot with zero uncertainty (what gt_pose sees): agent_pose (3,), object_positions (n, 2)."""
+    return PoseBelief.from_truth(agent_pose[None], object_positions[None])
+
+
+def _policies(method: str, root: Path, sim: SimConfig, lnet_version: str | None,
+              deterministic: bool) -> TrainedPolicies:
+    spec = method_spec(robot_method(method))
+    return TrainedPolicies.load(root, spec.variant, sim.n_objects, sim.arena, lnet_version,
+                                with_decision=spec.decision == "learned", deterministic=deterministic)
+
+
+def evaluation_success(method: str, root: Path, sim: SimConfig, keys: list[tuple[int, int]], deterministic: bool,
+                       n_envs: int, horizon: int | None) -> dict[tuple[int, int], float]:
+    """The evaluation's own play (``mor.eval.protocol.play_records``, the simulator's truth) of ``method``, a method
+    without the L-Net, on the Rearrange episodes ``keys`` ((seed, episode) pairs): each one's success."""
+    if uses_lnet(method):
+        raise ValueError(f"{method}: plays through the L-Net; its evaluation is the committed row")
+    spec = method_spec(method)
+    records = play_records(spec, sim, [("rearrange", seed, episode) for seed, episode in keys],
+                           _policies(method, root, sim, None, deterministic), lambda n: GroundTruthBatchTracker(),
+                           n_envs, horizon)
+    return {(r["seed"], r["episode"]): float(r["metrics"]["success"]) for r in records}
+
+
+class LNetTracker:
+    """The L-Net's streaming step for one robot: ``observe(image (S, S, 3) uint8, object_classes (n,), held (env
+    convention: n for none), previous action (-1 at the start), starting) -> PoseBelief`` (N = 1)."""
+
+    def __init__(self, runner: LNetRunner) -> None:
+        self._tracker = LNetBatchTracker(runner, 1)
+
+    def observe(self, image: np.ndarray, object_classes: np.ndarray, held: int, previous_action: int,
+                starting: bool) -> PoseBelief:
+        observation = {"image": image, "object_classes": np.asarray(object_classes), "held": held}
+        return self._tracker.observe([observation], [{}], np.array([previous_action]), np.array([starting]))
+
+
+class HierarchyPolicy:
+    """A method's frozen skills and decision for one robot, played as ``mor.eval.lockstep`` plays them: when no
+    skill runs, a decision (the learned policy or the nearest rule) picks the object; the pick skill runs until
+    it takes PICK, then the drop skill until DROP; the skills' masks and the decision mask are the evaluation's.
+
+    ``act(belief, held, targets)`` -> the next action; ``advance(action, held)`` after the robot executed it.
+    held: the held object's index, -1 when none. targets (n, 2) metres.
+    """
+
+    def __init__(self, method: str, policies: TrainedPolicies, arena: Arena, n_objects: int) -> None:
+        spec = method_spec(method)
+        self.method, self.arena, self.n_objects = method, arena, n_objects
+        self.uncertainty = has_uncertainty(spec.variant)
+        self._skills = {"pick": policies.pick, "drop": policies.drop}
+        self._decide = decider(spec, policies, arena)
+        self.chain = SkillChain()
+        self._rng = np.random.default_rng()
+
+    @classmethod
+    def load(cls, method: str, root: Path, sim: SimConfig, lnet_version: str | None,
+             deterministic: bool) -> HierarchyPolicy:
+        """``method``'s committed policies under ``root`` (``cards/policy``), checked against what they were trained
+        on (``lnet_version``: the identity of the L-Net a variant observes through, None for gt_pose)."""
+        policies = _policies(method, root, sim, lnet_version, deterministic)
+        return cls(method, policies, Arena.build(sim.arena, sim.arena_size), sim.n_objects)
+
+    def start(self, seed: int) -> None:
+        """A new episode: no skill running; the skills' draws from a generator seeded by ``seed`` (as in
+        evaluation, where it is the episode's reset seed)."""
+        self.chain = SkillChain()
+        self._rng = np.random.default_rng(seed)
+
+    def _held(self, held: int) -> np.ndarray:
+        """(1,) the env convention of the policies' inputs: n when nothing is held."""
+        return np.array([held if held >= 0 else self.n_objects])
+
+    def act(self, belief: PoseBelief, held: int, targets: np.ndarray) -> int:
+        """The next primitive action for one robot's ``belief`` (N = 1)."""
+        held_env, targets = self._held(held), np.asarray(targets, np.float32)
+        if self.chain.task is None:
+            choice = self._decide(belief, held_env, targets[None], np.array([self.chain.index]))
+            self.chain.decide(int(choice[0]), int(held_env[0]), self.n_objects)
+        task = self.chain.task
+        vector = observation_vector(belief, held_env, task, self.chain.goal(targets)[None], self.uncertainty,
+                                    self.arena)
+        return int(self._skills[task].act_batch(vector, skill_mask(task)[None], [self._rng])[0])
+
+    def advance(self, action: int, held: int) -> None:
+        """After the robot executed ``action`` and now holds ``held`` (-1: nothing): the chain moves on."""
+        self.chain.advance(action, int(self._held(held)[0]), self.n_objects)
+
+    @property
+    def skill(self) -> str:
+        """The running skill (pick, drop; after ``act``, the one that chose its action) or 'decision' when one is
+        due."""
+        return self.chain.task or "decision"
+
+
+__all__ = ["ROBOT_METHODS", "HierarchyPolicy", "LNetRunner", "LNetTracker", "PoseBelief", "evaluation_success",
+           "load_lnet", "robot_method", "truth_belief", "uses_lnet"]
