@@ -62,12 +62,13 @@ def compute_section(compute: dict[str, Any] | None) -> list[str]:
 
 
 def shortfall_section(rows: list[dict[str, Any]], localisation: dict[str, dict[str, Any]]) -> list[str]:
-    """The card's "Where ours falls short" section: every ✗ of Tables 1-4 with its learning curves and L-Net error."""
+    """The card's "Where ours falls short" section: every ✗ or ≈ of Tables 1-4 with its learning curves and L-Net
+    error."""
     lines = [line for spec in TABLES.values() for line in shortfalls(spec, rows, localisation)]
     if not lines:
         return []
     return ["", "## Where ours falls short of the paper", "",
-            "Every row with a ✗ above, the metrics it misses by, the learning curves of the policies it played, and "
+            "Every row with a ✗ (worse) or ≈ (no difference shown) above, the metrics it misses on, the learning curves of the policies it played, and "
             "the localisation error of the L-Net it observed through (in its own setting).", "", *lines]
 
 

@@ -165,11 +165,6 @@ LEGEND = ("Cells: mean ± std over the evaluation seeds' means [95% bootstrap in
           "paper's published numbers, not ours.")
 
 
-def _better(ours: dict[str, Any], theirs: tuple[float, float], metric: str) -> bool:
-    """Our mean better than the paper's (%E: lower is better)."""
-    return ours["mean"] < theirs[0] if metric in LOWER_IS_BETTER else ours["mean"] > theirs[0]
-
-
 def verdict(ours: dict[str, Any], theirs: tuple[float, float], metric: str) -> str:
     """"better" or "worse" when our whole 95% interval lies on that side of the paper's mean (%E: lower is
     better), "no difference" when it contains it."""
@@ -320,8 +315,9 @@ def _localisation(row: dict[str, Any], localisation: dict[str, dict[str, Any]]) 
 
 
 def shortfalls(spec: TableSpec, rows: list[dict[str, Any]], localisation: dict[str, dict[str, Any]]) -> list[str]:
-    """One line per row of ``spec`` that is worse than the paper's on some metric: those metrics, and the evidence
-    of why (the learning curves of its policies; the localisation error of its L-Net in that setting).
+    """One line per row of ``spec`` not shown better than the paper's on some metric (``verdict``: worse, or no
+    difference): those metrics, and the evidence of why (the learning curves of its policies; the localisation
+    error of its L-Net in that setting).
 
     localisation: workspace ("." or "settings/NAME") -> ``localisation_headline`` plus its ``file``."""
     lines = []
@@ -331,7 +327,7 @@ def shortfalls(spec: TableSpec, rows: list[dict[str, Any]], localisation: dict[s
             continue
         worse = [f"{METRIC_LABELS[m]} {row['metrics'][m]['mean']:.3f} (paper {theirs[0]:.3f})"
                  for m, theirs in zip(METRIC_NAMES, line.paper, strict=True)
-                 if theirs is not None and m in row["metrics"] and not _better(row["metrics"][m], theirs, m)]
+                 if theirs is not None and m in row["metrics"] and verdict(row["metrics"][m], theirs, m) != "better"]
         if worse:
             curves = _learning_curves(row)
             lines.append(f"- Table {spec.number}, {row_label(line, row)}: " + ", ".join(worse)

@@ -24,6 +24,7 @@ from mor.policy.belief import PoseBelief
 from mor.policy.features import Encode, observation_vector, pose_inputs
 from mor.policy.names import Task
 from mor.policy.observations import BatchTracker, observation_space, task_goal
+from mor.sim.arena import Arena
 from mor.sim.metrics import is_fixed
 from mor.sim.rules import N_ACTIONS, Action
 from mor.sim.tasks import DropEnv, PickEnv, RearrangeEnv
@@ -130,10 +131,10 @@ EpisodeKey = Any  # what names an episode for the caller of ``SkillHierarchy.pla
 
 @dataclass
 class Slot:
-    """One environment of a ``SkillHierarchy``: its latest observation and info, its place in the skill chain, the
-    generator of its skills' draws (seeded by the episode), and its episode so far."""
+    """One environment of a ``SkillHierarchy`` (or one robot: no env): its latest observation and info, its place
+    in the skill chain, the generator of its skills' draws (seeded by the episode), and its episode so far."""
 
-    env: gym.Env
+    env: gym.Env | None
     key: EpisodeKey = None
     active: bool = False
     observation: dict[str, Any] = field(default_factory=dict)
@@ -168,25 +169,83 @@ class Slot:
         return {"metrics": dict(self.info["metrics"]), "steps": self.steps, "return": self.total}
 
 
-class SkillHierarchy:
-    """The one loop of the skill hierarchy (paper section 4.2), over N environments in lockstep: one tracker pass (one
-    L-Net forward) and one batched forward per skill per primitive step.
+class SkillPolicy:
+    """The policy half of the hierarchy over N slots, with no environment in it: the decisions that are due, then
+    each active slot's next action (one batched forward per skill), then each slot's chain moved on.
+    ``SkillHierarchy`` runs it over simulated environments, the robot controller (``mor.robot.policy``) on a robot.
 
-    task ``decision``: the full task (``MOR/Rearrange-v0``); a decision (``decide``) starts a slot's skill chain,
-    which runs the pick skill, then the drop skill (``SkillChain``). ``pick`` / ``drop``: that skill alone on its
-    own task, with the goal the task gives. ``encode`` turns k slots into the skills' batched input (the pose
-    layout's vectors, or a baseline's pixels). Evaluation and the policy video ``play`` episodes through it;
-    training's decision env (``HierarchicalRearrange``) drives one slot with ``start``/``observe``/``decide``/
-    ``step``. A slot's draws come from a generator seeded by its episode, so what it plays does not depend on the
-    slot or the batch.
+    task ``decision``: the full task; a decision starts a slot's skill chain, which runs the pick skill, then the
+    drop skill (``SkillChain``). ``pick`` / ``drop``: that skill alone on its own task, with the goal the task
+    gives. ``encode`` turns k slots into the skills' batched input (the pose layout's vectors, or a baseline's
+    pixels). A slot's draws come from its own generator, so what it plays does not depend on the slot or the batch.
+    """
+
+    def __init__(self, skills: dict[str, Skill], encode: Encode, task: Task, arena: Arena) -> None:
+        self.skills, self.encode, self.task, self.arena = skills, encode, task, arena
+
+    def due(self, slots: list[Slot]) -> list[int]:
+        """The active slots of the full task whose next decision is due."""
+        return [i for i, s in enumerate(slots) if s.active and self.task == "decision" and s.chain.task is None]
+
+    @staticmethod
+    def decide(slot: Slot, choice: int) -> None:
+        """Start decision ``choice`` (an object index) in ``slot``."""
+        slot.chain.decide(int(choice), slot.held, len(slot.targets))
+
+    def decide_due(self, slots: list[Slot], belief: PoseBelief, decide: Decide) -> None:
+        """Every due decision, by ``decide`` for those slots at once."""
+        due = self.due(slots)
+        if due:
+            chosen = [slots[i] for i in due]
+            choices = decide(belief.take(np.array(due)), np.array([s.held for s in chosen]),
+                             np.stack([s.targets for s in chosen]), np.array([s.chain.index for s in chosen]))
+            for slot, choice in zip(chosen, choices, strict=True):
+                self.decide(slot, choice)
+
+    def actions(self, slots: list[Slot], belief: PoseBelief) -> dict[int, int]:
+        """Each active slot's next primitive action (its skill running): one batched forward per skill."""
+        actions: dict[int, int] = {}
+        for skill in ("pick", "drop"):
+            group = [i for i, s in enumerate(slots)
+                     if s.active and (s.chain.task if self.task == "decision" else self.task) == skill]
+            if not group:
+                continue
+            chosen = [slots[i] for i in group]
+            inputs = self.encode(skill, [s.observation for s in chosen], [s.info for s in chosen],
+                                 belief.take(np.array(group)), np.stack([self._goal(s, skill) for s in chosen]),
+                                 self.arena)
+            masks = np.stack([skill_mask(skill)] * len(group))
+            picked = self.skills[skill].act_batch(inputs, masks, [s.rng for s in chosen])
+            actions.update(zip(group, (int(a) for a in picked), strict=True))
+        return actions
+
+    def advance(self, slot: Slot, action: int) -> None:
+        """After ``slot`` took ``action`` (its observation now the next one): its chain moves on."""
+        if self.task == "decision":
+            slot.chain.advance(action, slot.held, len(slot.targets))
+
+    def _goal(self, slot: Slot, skill: str) -> np.ndarray:
+        return slot.chain.goal(slot.targets) if self.task == "decision" else task_goal(slot.observation, skill)
+
+
+class SkillHierarchy:
+    """The one loop of the skill hierarchy (paper section 4.2), a ``SkillPolicy`` over N environments in lockstep:
+    one tracker pass (one L-Net forward) and one batched forward per skill per primitive step.
+
+    Evaluation and the policy video ``play`` episodes through it; training's decision env
+    (``HierarchicalRearrange``) drives one slot with ``start``/``observe``/``decide``/``step``.
     """
 
     def __init__(self, envs: list[gym.Env], tracker: BatchTracker, skills: dict[str, Skill], encode: Encode,
                  task: Task) -> None:
         self.slots = [Slot(env) for env in envs]
-        self.tracker, self.skills, self.encode, self.task = tracker, skills, encode, task
-        self.arena = envs[0].unwrapped.arena
+        self.tracker = tracker
+        self.policy = SkillPolicy(skills, encode, task, envs[0].unwrapped.arena)
         self.belief: PoseBelief | None = None
+
+    @property
+    def arena(self) -> Arena:
+        return self.policy.arena
 
     def start(self, i: int, seed: int | None, key: EpisodeKey = None, options: dict[str, Any] | None = None) -> None:
         """Begin an episode in slot ``i`` (reset seed ``seed``; None continues the env's and the draws' generators)."""
@@ -208,20 +267,14 @@ class SkillHierarchy:
                                            np.array([s.previous for s in slots]), np.array([s.starting for s in slots]))
         return self.belief
 
-    def due(self) -> list[int]:
-        """The active slots of the full task whose next decision is due."""
-        return [i for i, s in enumerate(self.slots) if s.active and self.task == "decision" and s.chain.task is None]
-
     def decide(self, i: int, choice: int) -> None:
         """Start decision ``choice`` (an object index) in slot ``i``."""
-        slot = self.slots[i]
-        slot.chain.decide(int(choice), slot.held, len(slot.targets))
+        self.policy.decide(self.slots[i], choice)
 
     def step(self) -> list[int]:
         """One primitive step of every active slot (each with its skill running): the slots whose episode ended."""
-        active = [i for i, s in enumerate(self.slots) if s.active]
         ended = []
-        for i, action in self._act(active).items():
+        for i, action in self.policy.actions(self.slots, self.belief).items():
             slot = self.slots[i]
             slot.observation, reward, terminated, truncated, slot.info = slot.env.step(action)
             slot.previous, slot.starting = action, False
@@ -229,8 +282,8 @@ class SkillHierarchy:
             slot.terminated, slot.truncated = bool(terminated), bool(truncated)
             if slot.done:
                 ended.append(i)
-            elif self.task == "decision":
-                slot.chain.advance(action, slot.held, len(slot.targets))
+            else:
+                self.policy.advance(slot, action)
         return ended
 
     def play(self, episodes: list[tuple[EpisodeKey, int]], decide: Decide | None,
@@ -245,13 +298,7 @@ class SkillHierarchy:
             belief = self.observe()
             if on_step is not None:
                 on_step(self)
-            due = self.due()
-            if due:
-                slots = [self.slots[i] for i in due]
-                choices = decide(belief.take(np.array(due)), np.array([s.held for s in slots]),
-                                 np.stack([s.targets for s in slots]), np.array([s.chain.index for s in slots]))
-                for i, choice in zip(due, choices, strict=True):
-                    self.decide(i, choice)
+            self.policy.decide_due(self.slots, belief, decide)
             for i in self.step():
                 yield self.slots[i].key, self.slots[i].outcome()
                 self._next(i, queue)
@@ -262,25 +309,6 @@ class SkillHierarchy:
             self.start(i, seed, key)
         else:
             self.stop(i)
-
-    def _goal(self, slot: Slot, skill: str) -> np.ndarray:
-        return slot.chain.goal(slot.targets) if self.task == "decision" else task_goal(slot.observation, skill)
-
-    def _act(self, active: list[int]) -> dict[int, int]:
-        """Each active slot's next primitive action: one batched forward per skill."""
-        actions: dict[int, int] = {}
-        for skill in ("pick", "drop"):
-            group = [i for i in active if (self.slots[i].chain.task if self.task == "decision" else self.task) == skill]
-            if not group:
-                continue
-            slots = [self.slots[i] for i in group]
-            inputs = self.encode(skill, [s.observation for s in slots], [s.info for s in slots],
-                                 self.belief.take(np.array(group)), np.stack([self._goal(s, skill) for s in slots]),
-                                 self.arena)
-            masks = np.stack([skill_mask(skill)] * len(group))
-            chosen = self.skills[skill].act_batch(inputs, masks, [s.rng for s in slots])
-            actions.update(zip(group, (int(a) for a in chosen), strict=True))
-        return actions
 
 
 class HierarchicalRearrange(gym.Env):

@@ -13,13 +13,12 @@ import numpy as np
 
 from mor.errors import ConfigError
 from mor.eval.methods import METHODS, TrainedPolicies, method_spec
-from mor.eval.protocol import decider, play_records
+from mor.eval.protocol import decider, method_inputs, play_records
 from mor.lnet.runtime import LNetRunner, load_lnet
 from mor.policy.belief import PoseBelief
-from mor.policy.features import observation_vector
-from mor.policy.hierarchy import SkillChain, skill_mask
+from mor.policy.hierarchy import SkillPolicy, Slot
 from mor.policy.lnet_tracking import LNetBatchTracker
-from mor.policy.observations import GroundTruthBatchTracker, has_uncertainty
+from mor.policy.observations import GroundTruthBatchTracker
 from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
 
@@ -81,9 +80,9 @@ class LNetTracker:
 
 
 class HierarchyPolicy:
-    """A method's frozen skills and decision for one robot, played as ``mor.eval.lockstep`` plays them: when no
-    skill runs, a decision (the learned policy or the nearest rule) picks the object; the pick skill runs until
-    it takes PICK, then the drop skill until DROP; the skills' masks and the decision mask are the evaluation's.
+    """A method's frozen skills and decision for one robot: the hierarchy's own ``SkillPolicy`` over one slot with
+    no environment, so the robot plays exactly as the evaluation does (the decision when due, the pick skill until
+    PICK, then the drop skill until DROP, the evaluation's masks and encoding).
 
     ``act(belief, held, targets)`` -> the next action; ``advance(action, held)`` after the robot executed it.
     held: the held object's index, -1 when none. targets (n, 2) metres.
@@ -91,12 +90,11 @@ class HierarchyPolicy:
 
     def __init__(self, method: str, policies: TrainedPolicies, arena: Arena, n_objects: int) -> None:
         spec = method_spec(method)
-        self.method, self.arena, self.n_objects = method, arena, n_objects
-        self.uncertainty = has_uncertainty(spec.variant)
-        self._skills = {"pick": policies.pick, "drop": policies.drop}
+        self.method, self.n_objects = method, n_objects
+        self._policy = SkillPolicy({"pick": policies.pick, "drop": policies.drop}, method_inputs(spec), "decision",
+                                   arena)
         self._decide = decider(spec, policies, arena)
-        self.chain = SkillChain()
-        self._rng = np.random.default_rng()
+        self._slot = Slot(None)
 
     @classmethod
     def load(cls, method: str, root: Path, sim: SimConfig, lnet_version: str | None,
@@ -109,33 +107,30 @@ class HierarchyPolicy:
     def start(self, seed: int) -> None:
         """A new episode: no skill running; the skills' draws from a generator seeded by ``seed`` (as in
         evaluation, where it is the episode's reset seed)."""
-        self.chain = SkillChain()
-        self._rng = np.random.default_rng(seed)
+        self._slot = Slot(None, active=True, rng=np.random.default_rng(seed))
 
-    def _held(self, held: int) -> np.ndarray:
-        """(1,) the env convention of the policies' inputs: n when nothing is held."""
-        return np.array([held if held >= 0 else self.n_objects])
+    def _observe(self, held: int, targets: np.ndarray | None = None) -> None:
+        """The slot's observation as the env gives it: held n when nothing is held."""
+        self._slot.observation["held"] = held if held >= 0 else self.n_objects
+        if targets is not None:
+            self._slot.observation["target_positions"] = np.asarray(targets, np.float32)
 
     def act(self, belief: PoseBelief, held: int, targets: np.ndarray) -> int:
         """The next primitive action for one robot's ``belief`` (N = 1)."""
-        held_env, targets = self._held(held), np.asarray(targets, np.float32)
-        if self.chain.task is None:
-            choice = self._decide(belief, held_env, targets[None], np.array([self.chain.index]))
-            self.chain.decide(int(choice[0]), int(held_env[0]), self.n_objects)
-        task = self.chain.task
-        vector = observation_vector(belief, held_env, task, self.chain.goal(targets)[None], self.uncertainty,
-                                    self.arena)
-        return int(self._skills[task].act_batch(vector, skill_mask(task)[None], [self._rng])[0])
+        self._observe(held, targets)
+        self._policy.decide_due([self._slot], belief, self._decide)
+        return self._policy.actions([self._slot], belief)[0]
 
     def advance(self, action: int, held: int) -> None:
         """After the robot executed ``action`` and now holds ``held`` (-1: nothing): the chain moves on."""
-        self.chain.advance(action, int(self._held(held)[0]), self.n_objects)
+        self._observe(held)
+        self._policy.advance(self._slot, action)
 
     @property
     def skill(self) -> str:
         """The running skill (pick, drop; after ``act``, the one that chose its action) or 'decision' when one is
         due."""
-        return self.chain.task or "decision"
+        return self._slot.chain.task or "decision"
 
 
 __all__ = ["ROBOT_METHODS", "HierarchyPolicy", "LNetRunner", "LNetTracker", "PoseBelief", "evaluation_success",
