@@ -66,7 +66,7 @@ def test_arena_too_small_fails_at_construction(monkeypatch: pytest.MonkeyPatch, 
     # Every case is geometrically impossible (a 2 m square leaves a 1 m x 1 m region 0.5 m from the walls, where no
     # target can lie 1.5 m from its object's start), so a smaller retry budget only makes giving up faster: with the
     # real budget (200 layout tries) each case takes 25-50 s to fail.
-    monkeypatch.setattr("mor.sim.episode._MAX_LAYOUT_TRIES", 10)
+    monkeypatch.setattr("mor.sim.episode.MAX_LAYOUT_TRIES", 10)
     with pytest.raises(ConfigError) as error:
         gym.make("MOR/Rearrange-v0", n_objects=n_objects, arena=shape, arena_size=size, image_size=16)
     message = assert_one_line(error.value, "arena_size", f"n_objects={n_objects}", shape)

@@ -18,32 +18,34 @@ MAX_CLEARANCE = 3.0  # metres: rays are cut here
 
 def clearance(belief: PoseBelief, held: NDArray, arena: Arena) -> NDArray[np.float32]:
     """(N, len(RAY_ANGLES)) distance, metres, the agent's centre can travel along each ray before its disc
-    touches a wall or a floor object's disc (held objects are carried, not obstacles), capped at MAX_CLEARANCE."""
-    origin = belief.agent_mean.astype(np.float64)[:, None, :]  # (N, 1, 2)
-    angles = belief.heading.astype(np.float64)[:, None] + RAY_ANGLES[None]  # (N, R)
-    direction = np.stack([np.cos(angles), np.sin(angles)], -1)  # (N, R, 2)
-    distance = np.minimum(_to_walls(origin, direction, arena) - AGENT_RADIUS, MAX_CLEARANCE)
-    n_objects = belief.n_objects
-    floor = np.arange(n_objects)[None] != np.asarray(held, int)[:, None]  # (N, n)
-    offset = belief.object_mean.astype(np.float64) - origin  # (N, n, 2) from the agent to each object
-    along = np.einsum("nrd,nod->nro", direction, offset)  # (N, R, n) along each ray
-    across_sq = np.sum(offset**2, -1)[:, None] - along**2
+    touches a wall or a floor object's disc (held objects are carried, not obstacles), capped at MAX_CLEARANCE.
+
+    The arrays run (rays, walls or objects, N): the N environments innermost, so that each operation is one long
+    loop however small the arena or the scene."""
+    origin = belief.agent_mean.astype(np.float64).T[:, None, None]  # (2, 1, 1, N)
+    angles = belief.heading.astype(np.float64)[None] + RAY_ANGLES[:, None]  # (R, N)
+    direction = np.stack([np.cos(angles), np.sin(angles)])[:, :, None]  # (2, R, 1, N)
+    distance = np.minimum(_to_walls(origin, direction, arena) - AGENT_RADIUS, MAX_CLEARANCE)  # (R, N)
+    floor = np.arange(belief.n_objects)[:, None] != np.asarray(held, int)[None]  # (n, N)
+    offset = belief.object_mean.astype(np.float64).transpose(2, 1, 0)[:, None] - origin  # (2, 1, n, N) agent -> object
+    along = direction[0] * offset[0] + direction[1] * offset[1]  # (R, n, N) along each ray
+    across_sq = (offset[0] ** 2 + offset[1] ** 2) - along**2
     reach = (AGENT_RADIUS + OBJECT_RADIUS) ** 2 - across_sq
-    hit = floor[:, None] & (reach > 0) & (along > 0)
+    hit = floor & (reach > 0) & (along > 0)
     object_distance = np.where(hit, along - np.sqrt(np.maximum(reach, 0.0)), np.inf)
-    distance = np.minimum(distance, object_distance.min(-1))
-    return np.maximum(distance, 0.0).astype(np.float32)
+    distance = np.minimum(distance, object_distance.min(axis=1))
+    return np.maximum(distance, 0.0).astype(np.float32).T
 
 
 def _to_walls(origin: NDArray, direction: NDArray, arena: Arena) -> NDArray:
-    """(N, R) distance along each ray to the first wall it crosses."""
-    start, end = arena.wall_starts[None, None], arena.wall_ends[None, None]  # (1, 1, W, 2)
+    """(R, N) distance along each ray to the first wall it crosses; origin (2, 1, 1, N), direction (2, R, 1, N)."""
+    shape = (2, 1, arena.n_walls, 1)
+    start, end = arena.wall_starts.T.reshape(shape), arena.wall_ends.T.reshape(shape)
     wall = end - start
-    o, d = origin[:, :, None], direction[:, :, None]  # (N, R|1, 1, 2)
-    denominator = d[..., 0] * wall[..., 1] - d[..., 1] * wall[..., 0]
-    delta = start - o
+    denominator = direction[0] * wall[1] - direction[1] * wall[0]  # (R, W, N)
+    delta = start - origin
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = (delta[..., 0] * wall[..., 1] - delta[..., 1] * wall[..., 0]) / denominator
-        u = (delta[..., 0] * d[..., 1] - delta[..., 1] * d[..., 0]) / denominator
+        t = (delta[0] * wall[1] - delta[1] * wall[0]) / denominator
+        u = (delta[0] * direction[1] - delta[1] * direction[0]) / denominator
     valid = (np.abs(denominator) > 1e-12) & (t >= 0) & (u >= 0) & (u <= 1)
-    return np.where(valid, t, np.inf).min(-1)
+    return np.where(valid, t, np.inf).min(axis=1)

@@ -21,7 +21,12 @@ OBJECT_SEPARATION: float = 0.6
 TARGET_MIN_DISTANCE: float = SUCCESS_RADIUS + 0.5
 #: The agent spawns at least this far (metres) from walls and, beyond its and the objects' radii, from objects.
 SPAWN_CLEARANCE: float = 0.2
-_MAX_LAYOUT_TRIES: int = 50
+#: The agent's spawn point keeps this far (metres) from every wall ...
+SPAWN_WALL_MARGIN: float = AGENT_RADIUS + SPAWN_CLEARANCE
+#: ... and this far (metres) from every object's centre.
+SPAWN_OBJECT_GAP: float = AGENT_RADIUS + OBJECT_RADIUS + SPAWN_CLEARANCE
+#: Tries of each rejection loop (per point, per spawn, per layout) before it gives up.
+MAX_LAYOUT_TRIES: int = 50
 
 
 @dataclass(frozen=True)
@@ -48,7 +53,7 @@ def _spaced_points(rng: np.random.Generator, arena: Arena, n: int, avoid: Array 
     """
     points: list[Array] = []
     for i in range(n):
-        for _ in range(_MAX_LAYOUT_TRIES):
+        for _ in range(MAX_LAYOUT_TRIES):
             point = arena.sample_point(rng, WALL_MARGIN)
             if point is None:
                 return None
@@ -65,13 +70,11 @@ def _spaced_points(rng: np.random.Generator, arena: Arena, n: int, avoid: Array 
 
 def spawn_pose(rng: np.random.Generator, arena: Arena, obstacles: Array) -> Array | None:
     """A free agent pose (3,) clear of walls and of ``obstacles`` (k, 2); None if none was found."""
-    for _ in range(_MAX_LAYOUT_TRIES):
-        point = arena.sample_point(rng, AGENT_RADIUS + SPAWN_CLEARANCE)
+    for _ in range(MAX_LAYOUT_TRIES):
+        point = arena.sample_point(rng, SPAWN_WALL_MARGIN)
         if point is None:
             return None
-        if len(obstacles) and np.min(np.linalg.norm(obstacles - point, axis=1)) < (
-            AGENT_RADIUS + OBJECT_RADIUS + SPAWN_CLEARANCE
-        ):
+        if len(obstacles) and np.min(np.linalg.norm(obstacles - point, axis=1)) < SPAWN_OBJECT_GAP:
             continue
         return np.array([point[0], point[1], rng.uniform(-np.pi, np.pi)])
     return None
@@ -87,9 +90,17 @@ def sample_wall_textures(rng: np.random.Generator, n_walls: int, texture_pool: s
     raise ConfigError(f"texture_pool: unknown pool {texture_pool!r}; choose 'per_side' or 'symmetric'")
 
 
+def sample_appearance(
+    rng: np.random.Generator, n_objects: int, n_walls: int, texture_pool: str
+) -> tuple[np.ndarray, tuple[int, ...]]:
+    """What a layout draws after its positions: (n,) distinct object class ids, int64, and one texture per wall."""
+    classes = rng.choice(N_CLASSES, size=n_objects, replace=False).astype(np.int64)
+    return classes, sample_wall_textures(rng, n_walls, texture_pool)
+
+
 def sample_layout(rng: np.random.Generator, arena: Arena, n_objects: int, texture_pool: str) -> EpisodeLayout:
     """Draw one episode's layout from ``rng``; raises ConfigError when the objects cannot fit in the arena."""
-    for _ in range(_MAX_LAYOUT_TRIES):
+    for _ in range(MAX_LAYOUT_TRIES):
         initial = _spaced_points(rng, arena, n_objects)
         if initial is None:
             continue
@@ -99,8 +110,7 @@ def sample_layout(rng: np.random.Generator, arena: Arena, n_objects: int, textur
         agent = spawn_pose(rng, arena, initial)
         if agent is None:
             continue
-        classes = rng.choice(N_CLASSES, size=n_objects, replace=False).astype(np.int64)
-        textures = sample_wall_textures(rng, arena.n_walls, texture_pool)
+        classes, textures = sample_appearance(rng, n_objects, arena.n_walls, texture_pool)
         return EpisodeLayout(classes, initial, targets, agent, textures)
     raise ConfigError(
         f"arena_size: a {arena.shape} arena of {arena.area():.1f} m^2 is too small for n_objects={n_objects} "

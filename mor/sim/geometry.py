@@ -19,16 +19,48 @@ def wrap_angle(angle: ArrayLike) -> Array:
     return wrapped - 2.0 * np.pi * (wrapped >= np.pi)
 
 
-def heading_vector(theta: float) -> Array:
-    """Unit vector (2,) pointing along heading ``theta`` (radians)."""
-    return np.array([np.cos(theta), np.sin(theta)])
+def heading_vector(theta: ArrayLike) -> Array:
+    """Unit vector(s) (..., 2) pointing along heading(s) ``theta`` (...,) radians; (2,) for one heading."""
+    return np.stack([np.cos(theta), np.sin(theta)], axis=-1)
+
+
+def vector_norm(vectors: ArrayLike) -> Array:
+    """Euclidean length (...,) of each vector (..., 2): the same bits as ``np.linalg.norm`` of each one alone.
+
+    ``np.linalg.norm(v)`` of one vector is BLAS's dot product (fused multiply-adds), which can differ in the last
+    bit from ``np.linalg.norm(v, axis=-1)``; ``np.vecdot`` runs the same BLAS dot per vector, so the rules' batched
+    form (``mor.sim.batch_world``) decides exactly as the per-environment form.
+    """
+    v = np.asarray(vectors, dtype=np.float64)
+    return np.sqrt(np.vecdot(v, v))
+
+
+#: ``shorter_than`` measures with ``vector_norm`` the vectors whose plain length lies this close (relative) to the bound
+_BLAS_BAND: float = 1e-12
+
+
+def shorter_than(dx: ArrayLike, dy: ArrayLike, length: float) -> NDArray[np.bool_]:
+    """Whether each vector (dx, dy) (...,) is shorter than ``length``, answering as ``vector_norm(v) < length`` does.
+
+    Computed as sqrt(dx² + dy²) on whole arrays (no BLAS call per vector): it differs from ``vector_norm`` by at
+    most a unit in the last place, so only vectors within 1e-12 (relative) of ``length`` are measured again by
+    ``vector_norm``.
+    """
+    dx, dy = np.asarray(dx, dtype=np.float64), np.asarray(dy, dtype=np.float64)
+    plain = np.sqrt(dx * dx + dy * dy)
+    shorter = plain < length
+    close = np.abs(plain - length) <= _BLAS_BAND * length
+    if close.any():
+        shorter[close] = vector_norm(np.stack([dx[close], dy[close]], axis=-1)) < length
+    return shorter
 
 
 def world_to_ego(points: ArrayLike, agent_pose: ArrayLike) -> Array:
-    """World points (..., 2) expressed in the ego frame of ``agent_pose`` = (x, y, theta)."""
-    x, y, theta = np.asarray(agent_pose, dtype=np.float64)
-    delta = np.asarray(points, dtype=np.float64) - np.array([x, y])
-    c, s = np.cos(theta), np.sin(theta)
+    """World points (..., 2) expressed in the ego frame of ``agent_pose`` = (x, y, theta), (3,) or (..., 3)
+    broadcast against the points' leading dimensions."""
+    pose = np.asarray(agent_pose, dtype=np.float64)
+    delta = np.asarray(points, dtype=np.float64) - pose[..., :2]
+    c, s = np.cos(pose[..., 2]), np.sin(pose[..., 2])
     return np.stack([c * delta[..., 0] + s * delta[..., 1], -s * delta[..., 0] + c * delta[..., 1]], axis=-1)
 
 
@@ -42,8 +74,13 @@ def ego_to_world(points: ArrayLike, agent_pose: ArrayLike) -> Array:
 
 def bearing(agent_pose: ArrayLike, point: ArrayLike) -> float:
     """Signed angle (radians, left positive) from the agent's heading to ``point``."""
-    ego = world_to_ego(point, agent_pose)
-    return float(np.arctan2(ego[1], ego[0]))
+    return float(bearings(agent_pose, point))
+
+
+def bearings(agent_poses: ArrayLike, points: ArrayLike) -> Array:
+    """``bearing`` of points (..., 2) from poses (..., 3) broadcast against them, radians (...,)."""
+    ego = world_to_ego(points, agent_poses)
+    return np.arctan2(ego[..., 1], ego[..., 0])
 
 
 def point_segment_distance(points: ArrayLike, seg_a: ArrayLike, seg_b: ArrayLike) -> Array:

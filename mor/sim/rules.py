@@ -1,6 +1,8 @@
 """The action rules of the world (paper Supplementary A), used by the env, oracle, collection and evaluation.
 
-Everything here is planar geometry on a ``WorldState``; MuJoCo only draws the result. Units: metres, radians.
+Everything here is planar geometry; MuJoCo only draws the result. Units: metres, radians. Each rule is written
+once, over N worlds at a time (the arrays' first axis; ``mor.sim.batch_world`` steps N worlds with them), and its
+``WorldState`` form for one world calls it with N = 1: the same float operations, so the same decisions.
 """
 
 from __future__ import annotations
@@ -9,17 +11,22 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from mor.sim.arena import Arena
 from mor.sim.catalog import OBJECT_RADIUS
 from mor.sim.geometry import (
     Array,
-    bearing,
+    bearings,
     heading_vector,
     point_segment_distance,
     segment_segment_distance,
+    vector_norm,
     wrap_angle,
 )
+
+#: (N, ...) bool, one row per world
+Flags = NDArray[np.bool_]
 
 
 class Action(IntEnum):
@@ -54,11 +61,20 @@ class MotionNoise:
 
     def move_distance(self, rng: np.random.Generator) -> float:
         """A MOVE's distance, metres; a negative draw (p ~ 0.1%) is clipped to 0 (the robot does not reverse)."""
-        return max(0.0, float(rng.normal(self.move_mean, self.move_std)))
+        return float(self.move_distances(rng.standard_normal()))
 
     def turn_angle(self, rng: np.random.Generator) -> float:
         """A turn's magnitude, radians."""
-        return float(rng.normal(self.turn_mean, self.turn_std))
+        return float(self.turn_angles(rng.standard_normal()))
+
+    def move_distances(self, standard: ArrayLike) -> Array:
+        """MOVE distances (...,) metres from standard normal draws (...,): ``rng.normal(mean, std)`` is
+        ``mean + std * rng.standard_normal()`` bit for bit, so one draw per MOVE from the env's generator."""
+        return np.maximum(0.0, self.move_mean + self.move_std * np.asarray(standard, dtype=np.float64))
+
+    def turn_angles(self, standard: ArrayLike) -> Array:
+        """Turn magnitudes (...,) radians from standard normal draws (...,)."""
+        return self.turn_mean + self.turn_std * np.asarray(standard, dtype=np.float64)
 
 
 @dataclass
@@ -81,12 +97,9 @@ class WorldState:
     def n_objects(self) -> int:
         return len(self.floor_positions)
 
-    def on_floor(self) -> Array:
+    def on_floor(self) -> Flags:
         """(n,) bool: objects in the scene (all but the held one)."""
-        mask = np.ones(self.n_objects, dtype=bool)
-        if self.held >= 0:
-            mask[self.held] = False
-        return mask
+        return floor_mask(self.held, self.n_objects)[0]
 
     def object_positions(self) -> Array:
         """(n, 2) where each object is now: the held one travels with the agent."""
@@ -114,65 +127,92 @@ class Events:
 _SHORTCUT_SLACK: float = 1e-9
 
 
+def floor_mask(held: ArrayLike, n_objects: int) -> Flags:
+    """(N, n) bool: which objects lie on the floor (all but the held one; held (N,) index, -1 for none)."""
+    return np.arange(n_objects) != np.asarray(held).reshape(-1, 1)
+
+
+def paths_obstructed(agent_poses: Array, distances: Array, floor_positions: Array, on_floor: Flags, arena: Arena,
+                     start_clearance: Array | None = None) -> Flags:
+    """(N,) whether sweeping each agent ``distances`` (N,) metres straight ahead hits a wall or a floor object.
+
+    agent_poses (N, 3); floor_positions (N, n, 2); on_floor (N, n). start_clearance (N,), optional: each start's
+    distance to the walls (``Arena.clearance``). Every point of a path lies within its distance of the start, so a
+    start farther than distance + ``AGENT_RADIUS`` from every wall cannot hit one: the exact swept-disc test against
+    the walls (~10x the rest for one world) then runs only for the others, which never changes an answer. Without
+    it every path is tested against the walls (cheaper for many worlds at once: some are near a wall anyway).
+    """
+    start = agent_poses[:, :2]
+    end = start + distances[:, None] * heading_vector(agent_poses[:, 2])
+    near = (np.arange(len(start)) if start_clearance is None
+            else np.flatnonzero(start_clearance < distances + AGENT_RADIUS + _SHORTCUT_SLACK))
+    blocked = np.zeros(len(start), dtype=bool)
+    if len(near):
+        gaps = segment_segment_distance(start[near, None], end[near, None], arena.wall_starts, arena.wall_ends)
+        blocked[near] = np.min(gaps, axis=-1) < AGENT_RADIUS
+    gaps = point_segment_distance(floor_positions, start[:, None], end[:, None])  # (N, n)
+    return blocked | np.any(on_floor & (gaps < AGENT_RADIUS + OBJECT_RADIUS), axis=-1)
+
+
+def visible_objects(agent_poses: Array, floor_positions: Array, on_floor: Flags) -> Flags:
+    """(N, n) whether each object lies on the floor, in the camera's horizontal field of view, and with no other
+    floor object's footprint cutting the line from the agent to it. agent_poses (N, 3); floor_positions (N, n, 2)."""
+    start = agent_poses[:, None, None, :2]
+    # gaps[e, i, j]: how far object j lies from the line from agent e to object i
+    gaps = point_segment_distance(floor_positions[:, None], start, floor_positions[:, :, None])
+    others = ~np.eye(floor_positions.shape[1], dtype=bool)
+    in_sight = ~np.any(on_floor[:, None] & others & (gaps < OBJECT_RADIUS), axis=-1)
+    in_view = ~(np.abs(bearings(agent_poses[:, None], floor_positions)) > CAMERA_FOV / 2.0)
+    return on_floor & in_view & in_sight
+
+
+def pick_candidates(agent_poses: Array, floor_positions: Array, held: NDArray[np.int64]) -> NDArray[np.int64]:
+    """(N,) the object PICK would take in each world: the nearest visible floor object within ``PICK_RANGE`` (the
+    lowest index among equally near ones); -1 if none or if the agent already holds one. held (N,), -1 for none."""
+    distances = np.linalg.norm(floor_positions - agent_poses[:, None, :2], axis=-1)
+    on_floor = floor_mask(held, floor_positions.shape[1])
+    reachable = visible_objects(agent_poses, floor_positions, on_floor) & (distances <= PICK_RANGE)
+    nearest = np.argmin(np.where(reachable, distances, np.inf), axis=-1)
+    return np.where(reachable.any(axis=-1) & (np.asarray(held) < 0), nearest, -1)
+
+
+def drop_point(agent_pose: Array) -> Array:
+    """Where DROP puts the held object: ``DROP_DISTANCE`` metres straight ahead, (..., 2) of poses (..., 3)."""
+    return agent_pose[..., :2] + DROP_DISTANCE * heading_vector(agent_pose[..., 2])
+
+
+def drops_free(agent_poses: Array, floor_positions: Array, on_floor: Flags, points: Array,
+               point_clearance: Array) -> Flags:
+    """(N,) whether an object fits at each of ``points`` (N, 2): inside the arena and clear of walls (its
+    ``point_clearance`` (N,) to the walls, from ``Arena.clearance(s)``), floor objects and the agent."""
+    clear_of_agent = ~(vector_norm(points - agent_poses[:, :2]) < AGENT_RADIUS + OBJECT_RADIUS)
+    spacing = np.linalg.norm(floor_positions - points[:, None], axis=-1)  # (N, n)
+    clear_of_objects = np.all(~on_floor | (spacing >= 2.0 * OBJECT_RADIUS), axis=-1)
+    return (point_clearance >= OBJECT_RADIUS) & clear_of_agent & clear_of_objects
+
+
 def move_obstructed(state: WorldState, arena: Arena, distance: float) -> bool:
     """Whether sweeping the agent ``distance`` metres straight ahead hits a wall or an object on the floor."""
-    start = state.agent_pose[:2]
-    end = start + distance * heading_vector(state.agent_pose[2])
-    # Every point of the path lies within ``distance`` of its start, so when the start is farther than
-    # distance + AGENT_RADIUS from every wall the exact test below must say "clear": skip it (it costs ~10x more).
-    near_wall = arena.clearance(start) < distance + AGENT_RADIUS + _SHORTCUT_SLACK
-    if near_wall and np.min(segment_segment_distance(start, end, arena.wall_starts, arena.wall_ends)) < AGENT_RADIUS:
-        return True
-    floor = state.floor_positions[state.on_floor()]
-    if len(floor) == 0:
-        return False
-    return bool(np.any(point_segment_distance(floor, start, end) < AGENT_RADIUS + OBJECT_RADIUS))
-
-
-def line_of_sight(state: WorldState, index: int) -> bool:
-    """Whether no other floor object's footprint cuts the line from the agent to object ``index``."""
-    start, end = state.agent_pose[:2], state.floor_positions[index]
-    others = [j for j in np.flatnonzero(state.on_floor()) if j != index]
-    if not others:
-        return True
-    return bool(np.all(point_segment_distance(state.floor_positions[others], start, end) >= OBJECT_RADIUS))
+    return bool(paths_obstructed(state.agent_pose[None], np.array([distance], dtype=np.float64),
+                                 state.floor_positions[None], state.on_floor()[None], arena,
+                                 np.array([arena.clearance(state.agent_pose[:2])]))[0])
 
 
 def visible(state: WorldState, index: int) -> bool:
     """Whether floor object ``index`` is in the camera's horizontal field of view and not occluded."""
-    if not state.on_floor()[index]:
-        return False
-    if abs(bearing(state.agent_pose, state.floor_positions[index])) > CAMERA_FOV / 2.0:
-        return False
-    return line_of_sight(state, index)
+    return bool(visible_objects(state.agent_pose[None], state.floor_positions[None], state.on_floor()[None])[0, index])
 
 
 def pick_candidate(state: WorldState) -> int:
     """The object PICK would take: the nearest visible floor object within ``PICK_RANGE``; -1 if none or busy."""
-    if state.held >= 0:
-        return -1
-    distances = np.linalg.norm(state.floor_positions - state.agent_pose[:2], axis=1)
-    for index in np.argsort(distances, kind="stable"):
-        if distances[index] > PICK_RANGE:
-            break
-        if visible(state, int(index)):
-            return int(index)
-    return -1
-
-
-def drop_point(agent_pose: Array) -> Array:
-    """Where DROP puts the held object: ``DROP_DISTANCE`` metres straight ahead, (2,)."""
-    return agent_pose[:2] + DROP_DISTANCE * heading_vector(agent_pose[2])
+    return int(pick_candidates(state.agent_pose[None], state.floor_positions[None], np.array([state.held]))[0])
 
 
 def drop_free(state: WorldState, arena: Arena, point: Array) -> bool:
     """Whether an object fits at ``point``: inside the arena and clear of walls, floor objects and the agent."""
-    if not arena.contains(point, OBJECT_RADIUS):
-        return False
-    if np.linalg.norm(point - state.agent_pose[:2]) < AGENT_RADIUS + OBJECT_RADIUS:
-        return False
-    floor = state.floor_positions[state.on_floor()]
-    return bool(np.all(np.linalg.norm(floor - point, axis=1) >= 2.0 * OBJECT_RADIUS))
+    point = np.asarray(point, dtype=np.float64)
+    return bool(drops_free(state.agent_pose[None], state.floor_positions[None], state.on_floor()[None], point[None],
+                           np.array([arena.clearance(point)]))[0])
 
 
 def apply_action(

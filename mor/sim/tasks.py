@@ -4,14 +4,45 @@ from __future__ import annotations
 
 import numpy as np
 from gymnasium import spaces
+from numpy.typing import ArrayLike, NDArray
 
 from mor.sim import metrics
 from mor.sim.env import MOREnv, StepOutcome
+from mor.sim.geometry import vector_norm
 from mor.sim.rules import Action, Events, WorldState
 
 SUCCESS_REWARD: float = 10.0
 COLLISION_PENALTY: float = 1.0
 STEP_PENALTY: float = 0.01
+
+#: (reward, terminated, success): one step's verdict, or N steps' as (N,) arrays
+Verdicts = tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]
+
+
+def progress_reward(before: ArrayLike, after: ArrayLike, goal: ArrayLike, success: ArrayLike,
+                    obstructed: ArrayLike) -> NDArray[np.float64]:
+    """Eq. 1: -(D_{t+1} - D_t) + 10 * [success] - [obstructed], D the agent-to-goal distance; agent positions
+    ``before`` and ``after`` the step and the goal (..., 2) metres, flags (...,) -> (...,)."""
+    progress = vector_norm(np.subtract(before, goal)) - vector_norm(np.subtract(after, goal))
+    return progress + SUCCESS_REWARD * np.asarray(success) - COLLISION_PENALTY * np.asarray(obstructed)
+
+
+def pick_verdicts(before: ArrayLike, after: ArrayLike, goal_position: ArrayLike, goal: ArrayLike, action: ArrayLike,
+                  picked: ArrayLike, obstructed: ArrayLike) -> Verdicts:
+    """Pick's verdict on N steps (or one): agent positions (..., 2) before and after, the goal object's position
+    (..., 2) and index, the action, what PICK took (-1: nothing) and whether a MOVE was obstructed (...,)."""
+    success = np.equal(picked, goal)
+    ended = np.equal(action, Action.PICK) | np.asarray(obstructed)
+    return progress_reward(before, after, goal_position, success, obstructed), ended, success
+
+
+def drop_verdicts(before: ArrayLike, after: ArrayLike, goal_position: ArrayLike, goal: ArrayLike, action: ArrayLike,
+                  dropped: ArrayLike, landed: ArrayLike, obstructed: ArrayLike) -> Verdicts:
+    """Drop's verdict on N steps (or one): as ``pick_verdicts`` with the target position, what DROP released
+    (-1: nothing) and where the goal object lies on the floor after the step (..., 2)."""
+    success = np.equal(dropped, goal) & metrics.is_fixed(landed, goal_position)
+    ended = np.equal(action, Action.DROP) | np.asarray(obstructed)
+    return progress_reward(before, after, goal_position, success, obstructed), ended, success
 
 
 def _goal_position_space(half_extent: float, shape: tuple[int, ...]) -> spaces.Box:
@@ -38,11 +69,10 @@ class PickEnv(MOREnv):
         return {"goal_object": self.goal_object}
 
     def _outcome(self, before: WorldState, events: Events) -> StepOutcome:
-        goal = before.floor_positions[self.goal_object]
-        progress = np.linalg.norm(before.agent_pose[:2] - goal) - np.linalg.norm(self.state.agent_pose[:2] - goal)
-        success = events.picked == self.goal_object
-        reward = progress + SUCCESS_REWARD * success - COLLISION_PENALTY * events.obstructed
-        return StepOutcome(float(reward), events.action == Action.PICK or events.obstructed, success)
+        reward, ended, success = pick_verdicts(
+            before.agent_pose[:2], self.state.agent_pose[:2], before.floor_positions[self.goal_object],
+            self.goal_object, events.action, events.picked, events.obstructed)
+        return StepOutcome(float(reward), bool(ended), bool(success))
 
 
 class DropEnv(MOREnv):
@@ -74,13 +104,10 @@ class DropEnv(MOREnv):
         return [(self.goal_position, int(self.layout.object_classes[self.goal_object]))]
 
     def _outcome(self, before: WorldState, events: Events) -> StepOutcome:
-        target = self.goal_position
-        progress = np.linalg.norm(before.agent_pose[:2] - target) - np.linalg.norm(self.state.agent_pose[:2] - target)
-        success = events.dropped == self.goal_object and bool(
-            metrics.is_fixed(self.state.floor_positions[[self.goal_object]], target[None])[0]
-        )
-        reward = progress + SUCCESS_REWARD * success - COLLISION_PENALTY * events.obstructed
-        return StepOutcome(float(reward), events.action == Action.DROP or events.obstructed, success)
+        reward, ended, success = drop_verdicts(
+            before.agent_pose[:2], self.state.agent_pose[:2], self.goal_position, self.goal_object, events.action,
+            events.dropped, self.state.floor_positions[self.goal_object], events.obstructed)
+        return StepOutcome(float(reward), bool(ended), bool(success))
 
 
 class RearrangeEnv(MOREnv):
