@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict
 from typing import Any
 
 from mor.config import Profile
 from mor.data.manifest import manifest_version, read_manifest
 from mor.errors import MorError
+from mor.lnet.calibration_fit import calibrate
 from mor.lnet.checkpoint import signature
-from mor.lnet.evaluate import calibrate, frame_estimates, metrics, predict
+from mor.lnet.evaluate import metrics
 from mor.lnet.figures import write_since_seen
+from mor.lnet.filter import TrackingSettings
 from mor.lnet.params import ABLATIONS, TrainParams
+from mor.lnet.predict import frame_estimates, predict
 from mor.lnet.runtime import load_lnet
 from mor.lnet.train import BEST, pick_device, train
 from pipelines import paths
@@ -44,13 +46,14 @@ def run(profile: Profile, study: str, steps: int, episodes: int, pretrain_steps:
         out = ABLATION / study / name
         summary = train(config, params, paths.LEROBOT / "train", paths.LEROBOT / "validation", out, version, device)
         model = load_lnet(out / BEST, device, signature(config, version, summary["image_size"]), calibrated=False).model
-        model.use_data_association(profile.lnet.data_association and config.tracker == "filter")
+        model.use_tracking(TrackingSettings(data_association=profile.lnet.data_association
+                                            and config.tracker == "filter"))
         _, calibration, _, _ = calibrate(model, frame_estimates(model, paths.LEROBOT / "validation", episodes, device))
         test = predict(model, paths.LEROBOT / "test", episodes, device)
-        scored = metrics(calibration.apply(test, test.confusable))
+        scored = metrics(calibration.scales.apply(test, test.confusable))
         results[name] = {key: scored[key] for key in REPORTED}
         results[name].update(best_validation_loss=summary["best_validation_loss"], train_seconds=summary["seconds"],
-                             overrides=overrides, calibration=asdict(calibration))
+                             overrides=overrides, calibration=calibration.values())
         write_json(ABLATION / study / "results.json", results)  # after each variant: a partial study is readable
     curves = {name: results[name]["object_error_by_steps_since_seen"] for name in ABLATIONS[study]}
     title = f"L-Net ablation '{study}' at {pretrain} + {steps} steps: object error vs time since seen (test)"

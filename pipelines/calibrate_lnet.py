@@ -2,7 +2,7 @@
 
 The PoseNet runs once over the validation episodes; the tracker is replayed on its estimates for every setting
 tried. With the filter tracker, both tracking rules (with and without data association) are calibrated (the
-measurement noise, then the scales: ``mor.lnet.evaluate.calibrate``) and scored on validation, side by side in
+measurement noise, then the scales: ``mor.lnet.calibration_fit.calibrate``) and scored on validation, side by side in
 ``tracking_rules``: the evidence for ``lnet.data_association`` (the model card's table). For the chosen rule the
 scales are also fitted by the other criterion (``lnet.calibration.criterion``: the NLL, or the coverage), each
 with and without the objects' lost probabilities and search belief (``lnet.calibration.lost_objects``,
@@ -13,22 +13,15 @@ all are scored on validation, in ``criteria`` (keyed ``nll``, ``coverage``, ``nl
 from __future__ import annotations
 
 import time
-from dataclasses import asdict
 from typing import Any
 
 from mor.config import Profile
-from mor.lnet.calibration import check_scales
-from mor.lnet.evaluate import (
-    CRITERIA,
-    calibrate,
-    calibrated_metrics,
-    criterion_name,
-    frame_estimates,
-    headline,
-    metrics,
-    stated_inputs,
-    tracked_calibration,
-)
+from mor.lnet.calibration_file import check_scales
+from mor.lnet.calibration_fit import CRITERIA, calibrate, criterion_name, tracked_calibration
+from mor.lnet.evaluate import calibrated_metrics, headline, metrics
+from mor.lnet.filter import TrackingSettings
+from mor.lnet.predict import frame_estimates
+from mor.lnet.stated import stated_inputs
 from mor.locking import writer_lock
 from mor.sim.arena import Arena
 from pipelines import paths
@@ -55,7 +48,7 @@ def _calibrate(profile: Profile) -> dict[str, Any]:
     rules = (not chosen, chosen) if runner.config.tracker == "filter" else (chosen,)  # the chosen one last: kept
     fits = {}
     for rule in rules:
-        runner.model.use_data_association(rule)
+        runner.model.use_tracking(TrackingSettings(data_association=rule))
         fits[rule] = calibrate(runner.model, episodes, criterion, arena if lost else None)
     predictions, calibration, tried, inputs = fits[chosen]
     check_scales(calibration, paths.LNET_CALIBRATION)
@@ -65,16 +58,16 @@ def _calibrate(profile: Profile) -> dict[str, Any]:
     by_criterion = {criterion_name(other, with_lost): calibration if criterion_name(other, with_lost) == name else
                     tracked_calibration(runner.model, predictions, other, inputs if with_lost else None)
                     for with_lost in (False, True) for other in CRITERIA}  # the chosen rule's tracking
-    payload = {**asdict(calibration), "dataset_version": runner.dataset_version, "criterion": name,
+    payload = {**calibration.values(), "dataset_version": runner.dataset_version, "criterion": name,
                "fitted_on": {"split": "validation", "frames": int(len(predictions.frame))},
                "measurement_noise_error_m": tried,
                "validation_before": metrics(predictions)["coverage"],
                "validation_after": after[chosen]["coverage"],
                "validation_after_stated": after[chosen]["stated"]["coverage"],
                "tracking_rules": {("with" if rule else "without") + "_data_association": {
-                   **asdict(fitted), "validation_after": headline(after[rule])}
+                   **fitted.values(), "validation_after": headline(after[rule])}
                    for rule, (_, fitted, _, _) in fits.items()},
-               "criteria": {other: {**asdict(fitted), "validation_after": headline(
+               "criteria": {other: {**fitted.values(), "validation_after": headline(
                    after[chosen] if other == name else calibrated_metrics(predictions, fitted, inputs))}
                    for other, fitted in by_criterion.items()},
                "seconds": round(time.perf_counter() - started, 1)}

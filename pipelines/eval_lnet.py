@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import shutil
 import time
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -14,25 +13,18 @@ from mor.atomic import atomic_folder
 from mor.config import Profile
 from mor.data.manifest import manifest_version, read_manifest
 from mor.data.sequences import SequenceWindows
-from mor.lnet.calibration import calibration_from_values
+from mor.lnet.calibration_file import calibration_from_values
 from mor.lnet.card import read_json, render_model_card, write_model_card
-from mor.lnet.evaluate import (
-    Predictions,
-    StatedInputs,
-    calibrated_metrics,
-    headline,
-    metrics,
-    predict,
-    predict_live,
-    stated_inputs,
-    story,
-)
+from mor.lnet.evaluate import calibrated_metrics, headline, metrics
 from mor.lnet.figures import (
     write_estimate_gif,
     write_estimate_strip,
     write_reliability_diagram,
     write_since_seen,
 )
+from mor.lnet.predict import predict, predict_live
+from mor.lnet.predictions import Predictions, story
+from mor.lnet.stated import StatedInputs, stated_inputs
 from mor.locking import writer_lock
 from mor.sim.arena import Arena
 from pipelines import paths
@@ -53,7 +45,7 @@ def _write_card(profile: Profile, card: Path) -> dict[str, Any]:
     """``run``'s work: the metrics, figures, weights and README of the model card, into the folder ``card``."""
     started = time.perf_counter()
     runner = load_trained(profile, paths.LNET / "model.pt")
-    calibration = runner.calibration
+    calibration = runner.fitted
     manifest = read_manifest(paths.MANIFEST)
     predictions = predict(runner.model, paths.LEROBOT / "test", profile.lnet.eval_episodes, runner.device)
     arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
@@ -62,7 +54,7 @@ def _write_card(profile: Profile, card: Path) -> dict[str, Any]:
     def scored(p: Predictions, p_inputs: StatedInputs) -> dict[str, Any]:
         return {"before_calibration": metrics(p), "after_calibration": calibrated_metrics(p, calibration, p_inputs)}
 
-    result = {"dataset_version": manifest_version(manifest), "calibration": asdict(calibration),
+    result = {"dataset_version": manifest_version(manifest), "calibration": calibration.values(),
               **scored(predictions, inputs)}
     chosen = runner.encoder_precision  # the other precision on the same frames, for lnet.encoder_precision's choice
     other = "bfloat16" if chosen == "float32" else "float32"
@@ -90,9 +82,9 @@ def _write_card(profile: Profile, card: Path) -> dict[str, Any]:
     reliability = {f"{name} ({when})": result[key]["reliability"][name]
                    for key, when in (("before_calibration", "before"), ("after_calibration", "after"))
                    for name in ("agent_position", "objects_seen", "heading")}
-    if calibration.lost_own or calibration.lost_shared is not None:  # lost probabilities fitted: a stated belief
+    if calibration.stated.lost_own or calibration.stated.lost_shared is not None:  # lost probabilities: stated
         reliability["objects_seen (after, stated)"] = result["after_calibration"]["stated"]["reliability_objects_seen"]
-    if calibration.search_find is not None:  # a search belief for objects not found: their own curve
+    if calibration.stated.search_find is not None:  # a search belief for objects not found: their own curve
         reliability["objects_unseen (after, stated)"] = result["after_calibration"]["stated"][
             "reliability_objects_unseen"]
     write_reliability_diagram(card / "reliability.png", np.asarray(result["before_calibration"]["reliability"]
@@ -101,7 +93,7 @@ def _write_card(profile: Profile, card: Path) -> dict[str, Any]:
     shown_episode, frames = story(predictions)
     episode = SequenceWindows(paths.LEROBOT / "test", window=None)[shown_episode]
     rows = predictions.episode == shown_episode
-    shown = calibration.apply(predictions, predictions.confusable).select(rows)
+    shown = calibration.scales.apply(predictions, predictions.confusable).select(rows)
     truth = {"agent_poses": episode["agent_pose"].numpy(), "object_positions": episode["object_positions"].numpy(),
              "object_classes": episode["object_classes"].numpy()}
     estimate = {name: getattr(shown, name) for name in ("agent_mean", "agent_tril", "heading", "kappa",

@@ -22,10 +22,11 @@ import numpy as np
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
-from mor.lnet.calibration import Calibration
+from mor.lnet.calibration_file import FittedCalibration
 from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig
-from mor.lnet.runtime import Estimates, LNetRunner
+from mor.lnet.runtime import LNetRunner
+from mor.lnet.stated import Estimates
 from mor.sim.config import SimConfig
 from mor.sim.geometry import wrap_angle
 from mor.sim.rules import N_ACTIONS
@@ -67,7 +68,7 @@ def benchmark_lnet(config: LNetConfig, image_size: int, batch_sizes: list[int], 
             "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}}
 
 
-def benchmark_streaming(model: LNet, calibration: Calibration, sim: SimConfig, n_envs: int, steps: int,
+def benchmark_streaming(model: LNet, fitted: FittedCalibration, sim: SimConfig, n_envs: int, steps: int,
                         repeats: int, seed: int = 0, compiled: bool = True) -> dict[str, Any]:
     """The environments' rendered steps and ``model``'s streaming step over the same ``n_envs`` envs (random
     actions, resets included): median frames/s of each over ``repeats`` runs of ``steps`` vector steps, and
@@ -78,15 +79,15 @@ def benchmark_streaming(model: LNet, calibration: Calibration, sim: SimConfig, n
     weights and frames, each timed separately in the same loop. Each of those holds its frames/s, ratio, runs,
     the largest difference of its estimates from the eager step's, over all arrays and per array
     (``difference_by_array``: metres, radians; headings wrapped), and the warm-up run's seconds (the
-    compilation). The model keeps its tracking settings (data association, noise); ``calibration`` is applied."""
+    compilation). ``fitted``: the calibration the step runs with (its tracking settings set on ``model``)."""
     envs = [gym.make(STREAMING_ENV, **sim.model_dump()) for _ in range(n_envs)]
     model = model.eval()
-    runners = {"eager": LNetRunner(model, calibration, sim.image_size, "benchmark")}
+    runners = {"eager": LNetRunner(model, fitted, sim.image_size, "benchmark")}
     if compiled:
-        runners["compiled"] = LNetRunner(model, calibration, sim.image_size, "benchmark", compiled=True)
+        runners["compiled"] = LNetRunner(model, fitted, sim.image_size, "benchmark", compiled=True)
         reduced = copy.deepcopy(model)
         reduced.use_encoder_precision("bfloat16")
-        runners["compiled_bfloat16"] = LNetRunner(reduced, calibration, sim.image_size, "benchmark", compiled=True)
+        runners["compiled_bfloat16"] = LNetRunner(reduced, fitted, sim.image_size, "benchmark", compiled=True)
     rng = np.random.default_rng(seed)
     observations = [env.reset(seed=seed + i)[0] for i, env in enumerate(envs)]
     states = {name: runner.initial_state(n_envs) for name, runner in runners.items()}
@@ -132,7 +133,7 @@ def benchmark_streaming(model: LNet, calibration: Calibration, sim: SimConfig, n
               "env_frames_per_s": env_rate, "lnet_frames_per_s": rates["eager"],
               "lnet_over_env": rates["eager"] / env_rate, "runs_env": env_rates, "runs_lnet": lnet_rates["eager"],
               "torch_threads": torch.get_num_threads(), "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS"),
-              "data_association": model.config.tracker == "filter" and model.filter.data_association,
+              "data_association": model.tracking.data_association,
               "sim": sim.model_dump()}
     for name, largest in differences.items():
         result[name] = {"lnet_frames_per_s": rates[name], "lnet_over_env": rates[name] / env_rate,
@@ -150,4 +151,5 @@ def _differences(first: Estimates, second: Estimates) -> dict[str, float]:
         return np.abs(wrap_angle(delta) if name == "heading" else delta)
 
     return {f.name: float(np.max(difference(f.name))) for f in fields(first)
-            if getattr(first, f.name).dtype != np.bool_}  # flags (object_searching) have no size of difference
+            if getattr(first, f.name) is not None  # search_density: only where the loop keeps the looks
+            and getattr(first, f.name).dtype != np.bool_}  # flags (object_searching) have no size of difference

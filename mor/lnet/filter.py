@@ -9,19 +9,19 @@ moved into the world frame with the estimated agent pose, weighted by the predic
 Mahalanobis gate. Everything is a torch expression, so the whole belief is trained with the NLL end to end
 (as backprop Kalman filters: Haarnoja et al. 2016; Kloss et al. 2021).
 
-``data_association`` (a tracking-time rule, off in training; ``lnet.data_association``, recorded in the
-calibration): the PoseNet confuses objects of one colour (its false "visible" frames are mostly a same-coloured
-object in view), so a slot's measurement that coincides with another slot's is shared between them by how well
-each belief explains it, and every weighted update keeps the spread of its two outcomes in the covariance (the
-probabilistic data association filter's covariance, Bar-Shalom et al. 2009), so a doubtful update widens the
+``TrackingSettings.data_association`` (a tracking-time rule, off in training; ``lnet.data_association``, recorded in
+``calibration.json``): the PoseNet confuses objects of one colour (its false "visible" frames are mostly a
+same-coloured object in view), so a slot's measurement that coincides with another slot's is shared between them by
+how well each belief explains it, and every weighted update keeps the spread of its two outcomes in the covariance
+(the probabilistic data association filter's covariance, Bar-Shalom et al. 2009), so a doubtful update widens the
 belief instead of shrinking it onto a possibly wrong place.
 
-``measurement_noise`` (a tracking-time setting fitted on validation by ``mor calibrate-lnet``, recorded in the
-calibration): multipliers of the PoseNet's object measurement covariance for objects of a colour of their own and
-for objects that share their colour with another (``mor.sim.catalog.shares_colour``). The PoseNet's object head
-sees one slot's class at a time, so it cannot know that a same-coloured object is in the episode; nearly all the
-badly wrong beliefs are of such objects, while the measurements of the others deserve more trust than the one
-learned scale gives (docs/assumptions.md).
+``TrackingSettings.noise_own`` and ``noise_shared`` (tracking-time settings fitted on validation by
+``mor calibrate-lnet``, recorded in ``calibration.json``): multipliers of the PoseNet's object measurement
+covariance for objects of a colour of their own and for objects that share their colour with another
+(``mor.sim.catalog.shares_colour``). The PoseNet's object head sees one slot's class at a time, so it cannot know
+that a same-coloured object is in the episode; nearly all the badly wrong beliefs are of such objects, while the
+measurements of the others deserve more trust than the one learned scale gives (docs/assumptions.md).
 
 Shapes: B episodes, K object slots. Positions in metres, headings in radians; the heading's belief is a Gaussian
 (mean, variance) on the circle, reported as a von Mises with kappa = 1 / variance.
@@ -30,6 +30,7 @@ Shapes: B episodes, K object slots. Positions in metres, headings in radians; th
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import torch
 from torch import nn
@@ -47,6 +48,19 @@ _LOG_PRIOR_STD = math.log(6.0 / math.sqrt(12.0))  # a uniform 6 m side: std 1.73
 #: The state: agent mean (B, 2), agent cov (B, 2, 2), heading (B,), heading variance (B,), object means (B, K, 2),
 #: object covs (B, K, 2, 2), the held index of the previous frame (B,) (-1 none).
 FilterState = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]
+
+
+@dataclass(frozen=True)
+class TrackingSettings:
+    """How the filter tracks, chosen by whoever runs it (module docstring), not weights: ``data_association`` the
+    rule; ``noise_own`` and ``noise_shared`` the multipliers (> 0) of the object measurement covariance for objects
+    of a colour of their own and for objects sharing their colour. ``calibration.json`` records the settings its
+    scales were fitted with (``mor.lnet.calibration_file``); ``LNet.use_tracking`` applies them. The LSTM tracker
+    has none: only the defaults."""
+
+    data_association: bool = False
+    noise_own: float = 1.0
+    noise_shared: float = 1.0
 
 
 def _eye(like: torch.Tensor) -> torch.Tensor:
@@ -142,11 +156,10 @@ def associate(weight: torch.Tensor, measured: torch.Tensor, noise: torch.Tensor,
 class BeliefFilter(nn.Module):
     """The learned parameters of the filter and one step of it (see the module docstring)."""
 
-    def __init__(self, n_slots: int, data_association: bool = False) -> None:
+    def __init__(self, n_slots: int, tracking: TrackingSettings = TrackingSettings()) -> None:
         super().__init__()
         self.n_slots = n_slots
-        self.data_association = data_association  # a tracking-time rule, not a weight (module docstring)
-        self.measurement_noise = (1.0, 1.0)  # objects of their own colour, objects sharing theirs (docstring)
+        self.tracking = tracking  # tracking-time settings, not weights (module docstring)
         actions = N_ACTIONS + 1  # the last row: no previous action (an episode's first frame)
         self.forward_distance = nn.Parameter(torch.zeros(actions))
         self.turn = nn.Parameter(torch.zeros(actions))
@@ -178,7 +191,7 @@ class BeliefFilter(nn.Module):
         ego_objects: (mean (B, K, 2), tril (B, K, 2, 2)) in the ego frame; visibility (B, K) probabilities or
         None (then every measurement is weighted by the gate alone); held (B,) index or -1; previous_action (B,)
         the action before this frame, -1 none; shared (B, K) bool, the object shares its colour with another
-        (which ``measurement_noise`` it gets; None: all of their own colour)."""
+        (which measurement-noise multiplier of ``tracking`` it gets; None: all of their own colour)."""
         agent, agent_cov, heading, heading_var, objects, object_cov, previous_held = state
         eye = _eye(agent)
         # 1. Motion: the previous action's learned displacement and turn, and their learned noise.
@@ -222,7 +235,7 @@ class BeliefFilter(nn.Module):
         jacobian = torch.stack([-s[..., 0] * ego_mean[..., 0] - c[..., 0] * ego_mean[..., 1],
                                 c[..., 0] * ego_mean[..., 0] - s[..., 0] * ego_mean[..., 1]], -1)  # d measured / d heading
         ego_cov = ego_tril @ ego_tril.transpose(-1, -2)
-        own, common = self.measurement_noise
+        own, common = self.tracking.noise_own, self.tracking.noise_shared
         if (own, common) != (1.0, 1.0):
             multiplier = torch.full_like(ego_cov[..., 0, 0], own)
             if shared is not None:
@@ -231,8 +244,8 @@ class BeliefFilter(nn.Module):
         noise = (scale[2] * rotation @ ego_cov @ rotation.transpose(-1, -2) + agent_cov[:, None]
                  + heading_var[:, None, None, None] * _outer(jacobian))
         weight = (~is_held).to(objects.dtype) if visibility is None else visibility * ~is_held
-        if self.data_association:
+        if self.tracking.data_association:
             weight = associate(weight, measured, noise, objects, object_cov)
         objects, object_cov = _kalman(objects, object_cov, measured, noise, weight, gated=True,
-                                      spread=self.data_association)
+                                      spread=self.tracking.data_association)
         return agent, agent_cov, heading, heading_var, objects, object_cov, held

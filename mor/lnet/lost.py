@@ -81,6 +81,11 @@ def arena_shares(truth: np.ndarray, mean: np.ndarray, tril: np.ndarray, rows: np
     return ArenaShares(arena.area(), shares.reshape(rows.shape))
 
 
+def log_sqrt_det(tril: np.ndarray) -> np.ndarray:
+    """log sqrt(det cov) of lower Cholesky factors (..., 2, 2)."""
+    return np.log(np.abs(tril[..., 0, 0])) + np.log(np.abs(tril[..., 1, 1]))
+
+
 def region_mass(d2: np.ndarray, weight: np.ndarray | float, share: np.ndarray) -> np.ndarray:
     """The mass of the stated belief's highest-density region that just reaches the truth (or a little more, see
     the module docstring): the truth is counted inside the k-sigma-equivalent region when this is <= the k-sigma
@@ -90,7 +95,7 @@ def region_mass(d2: np.ndarray, weight: np.ndarray | float, share: np.ndarray) -
 
 
 def log_density(d2: np.ndarray, half_log_det: np.ndarray, weight: np.ndarray | float, area: float) -> np.ndarray:
-    """log p(truth) of the stated belief; d2 as in ``region_mass``; half_log_det: log sqrt(det cov) of the
+    """log p(truth) of the stated belief; d2 as in ``region_mass``; half_log_det: ``log_sqrt_det`` of the
     (calibrated) Gaussian; area: the arena's (m^2)."""
     gaussian = -0.5 * d2 - math.log(2.0 * math.pi) - half_log_det
     with np.errstate(divide="ignore"):  # w = 0 or 1: one term is log 0 = -inf, which logaddexp absorbs

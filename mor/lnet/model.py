@@ -11,7 +11,7 @@ import torch
 from torch import nn
 
 from mor.data.schema import MAX_OBJECTS
-from mor.lnet.filter import BeliefFilter, cholesky_2x2
+from mor.lnet.filter import BeliefFilter, TrackingSettings, cholesky_2x2
 from mor.lnet.frames import ego_to_world
 from mor.lnet.likelihoods import MIN_KAPPA, positive, scale_tril
 from mor.lnet.params import LNetConfig
@@ -199,13 +199,19 @@ class LNet(nn.Module):
         else:
             self.filter = BeliefFilter(K)
 
-    def use_measurement_noise(self, own: float, shared: float) -> None:
-        """The filter's object measurement-noise multipliers (``mor.lnet.filter``) for objects of their own colour
-        and objects sharing it; anything but (1, 1) with the LSTM tracker is a ValueError."""
+    def use_tracking(self, tracking: TrackingSettings) -> None:
+        """Track with ``tracking`` from now on (the filter's rule and measurement noise, ``mor.lnet.filter``);
+        anything but the defaults with the LSTM tracker is a ValueError."""
         if self.config.tracker == "filter":
-            self.filter.measurement_noise = (float(own), float(shared))
-        elif (own, shared) != (1.0, 1.0):
-            raise ValueError("measurement-noise multipliers need the filter tracker; this model's tracker is the LSTM")
+            self.filter.tracking = tracking
+        elif tracking != TrackingSettings():
+            raise ValueError(f"tracking settings need the filter tracker; this model's tracker is the LSTM "
+                             f"({tracking})")
+
+    @property
+    def tracking(self) -> TrackingSettings:
+        """The tracking settings in use (the defaults for the LSTM tracker, which has none)."""
+        return self.filter.tracking if self.config.tracker == "filter" else TrackingSettings()
 
     def use_encoder_precision(self, precision: str) -> None:
         """The image encoder's arithmetic from now on, in training or inference: ``float32`` or ``bfloat16``
@@ -214,14 +220,6 @@ class LNet(nn.Module):
         if precision not in ("float32", "bfloat16"):
             raise ValueError(f"encoder precision: expected float32 or bfloat16, got {precision!r}")
         self.posenet.encoder_bfloat16 = precision == "bfloat16"
-
-    def use_data_association(self, on: bool) -> None:
-        """Track with the filter's data association (``mor.lnet.filter``) or without; ``on`` with the LSTM tracker
-        is a ValueError."""
-        if self.config.tracker == "filter":
-            self.filter.data_association = on
-        elif on:
-            raise ValueError("data association needs the filter tracker; this model's tracker is the LSTM")
 
     @property
     def _batch_dim(self) -> int:

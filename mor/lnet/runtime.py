@@ -8,14 +8,16 @@
 Inputs are the environments' observations (``mor.sim.env``): images (N, H, W, 3) uint8, object_classes (N, n),
 held (N,) with n meaning "nothing held", and the action taken before each frame (-1 at an episode's start); they
 are turned into the network's inputs by ``mor.data.observations.env_to_network``, the conversion the dataset
-windows use. One forward pass for all N environments, without gradients. The estimates are calibrated.
+windows use. One forward pass for all N environments, without gradients. The estimates are the stated belief
+(``mor.lnet.stated``), calibrated. ``mor.lnet.streaming.StreamingTracker`` runs this step over N environments'
+episodes (starts, ends, the search belief's looks).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,37 +26,19 @@ import torch
 
 from mor.data.observations import env_to_network
 from mor.errors import MorError
-from mor.lnet.calibration import CALIBRATION_FILE, Calibration, confusable, read_calibration
+from mor.lnet.calibration import Calibration
+from mor.lnet.calibration_file import CALIBRATION_FILE, FittedCalibration, read_calibration
 from mor.lnet.checkpoint import load_checkpoint, model_from_checkpoint
+from mor.lnet.filter import TrackingSettings
 from mor.lnet.model import LNet, PoseEstimate
 from mor.lnet.params import LNetConfig
-from mor.lnet.search import not_found
+from mor.lnet.search import SearchMap
+from mor.lnet.stated import Estimates, stated_estimates
 from mor.sim.rules import N_ACTIONS
 
 
 class ObservationMismatch(MorError, ValueError):
     """Observations the loaded model cannot read (wrong image size or dtype, inconsistent batch sizes)."""
-
-
-@dataclass(frozen=True)
-class Estimates:
-    """Calibrated world-frame estimates for N environments with n objects each (float32 numpy arrays).
-
-    agent_mean (N, 2) m; agent_cov (N, 2, 2) m^2; heading (N,) rad, the mean of a von Mises with concentration
-    heading_kappa (N,); object_mean (N, n, 2) m; object_cov (N, n, 2, 2) m^2; object_lost (N, n) the probability
-    that an object's belief is lost, the object anywhere in the arena instead (``mor.lnet.lost``; 0 unless the
-    calibration fitted it); object_searching (N, n) bool the belief has not found its object yet, so its stated
-    belief is the search belief (``mor.lnet.search``: ``SearchMap`` with ``Calibration.search_find``).
-    """
-
-    agent_mean: np.ndarray
-    agent_cov: np.ndarray
-    heading: np.ndarray
-    heading_kappa: np.ndarray
-    object_mean: np.ndarray
-    object_cov: np.ndarray
-    object_lost: np.ndarray
-    object_searching: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -65,22 +49,20 @@ class StreamState:
     memory: Any
 
 
-def _covariance(tril: torch.Tensor) -> np.ndarray:
-    return (tril @ tril.transpose(-1, -2)).float().cpu().numpy()
-
-
 class LNetRunner:
-    """A trained L-Net with its calibration, stepped one frame at a time over N environments."""
+    """A trained L-Net with its calibration, stepped one frame at a time over N environments. ``fitted``: the
+    scales, the tracking settings (applied to ``model`` here) and the stated belief's parameters."""
 
-    def __init__(self, model: LNet, calibration: Calibration, image_size: int, dataset_version: str,
+    def __init__(self, model: LNet, fitted: FittedCalibration, image_size: int, dataset_version: str,
                  device: torch.device | str = "cpu", checkpoint_digest: str | None = None,
                  compiled: bool = False) -> None:
+        model.use_tracking(fitted.tracking)
         self.model = model.to(device).eval()
         # compiled: the step runs as torch.compile's fused kernels (the same arithmetic up to float rounding, about
         # 1e-7 here; about a minute to compile on first use, then cached on disk by torch). docs/performance.md.
         self.compiled = compiled
         self._network = torch.compile(self.model, dynamic=False) if compiled else self.model
-        self.calibration = calibration
+        self.fitted = fitted
         self.image_size = image_size
         self.dataset_version = dataset_version
         self.checkpoint_digest = checkpoint_digest
@@ -89,7 +71,7 @@ class LNetRunner:
     @property
     def identity(self) -> str:
         """What a policy trained through this L-Net records (``lnet_version``): ``lnet_identity``."""
-        return lnet_identity(self.dataset_version, self.checkpoint_digest, self.calibration, self.encoder_precision)
+        return lnet_identity(self.dataset_version, self.checkpoint_digest, self.fitted, self.encoder_precision)
 
     @property
     def encoder_precision(self) -> str:
@@ -157,21 +139,17 @@ class LNetRunner:
         tracked, state = self.track(images, object_classes, held, previous_actions, state)
         return self.estimates(tracked, np.asarray(object_classes), np.asarray(held)), state
 
-    def estimates(self, tracked: PoseEstimate, object_classes: np.ndarray, held: np.ndarray) -> Estimates:
-        """The last frame of the model's world-frame estimate (N, T, ...) for the n objects of
-        ``object_classes`` (N, n), calibrated (``held`` (N,): which object each environment holds, n or -1 for
-        none), as numpy."""
+    def estimates(self, tracked: PoseEstimate, object_classes: np.ndarray, held: np.ndarray,
+                  search: SearchMap | None = None) -> Estimates:
+        """The stated belief (``mor.lnet.stated.stated_estimates``) of the last frame of the model's world-frame
+        estimate (N, T, ...) for the n objects of ``object_classes`` (N, n) (``held`` (N,): which object each
+        environment holds, n or -1 for none), calibrated, as numpy; ``search``: the environments' looks, this frame's
+        included, for the search belief's density (None: without it)."""
         n_objects = object_classes.shape[1]
         last = PoseEstimate(*(getattr(tracked, name)[:, -1] for name in (
             "agent_mean", "agent_tril", "heading", "kappa")), tracked.object_mean[:, -1, :n_objects],
             tracked.object_tril[:, -1, :n_objects], frame=tracked.frame)
-        mask = confusable(object_classes, held)
-        as_numpy = lambda t: t.float().cpu().numpy()  # noqa: E731
-        searching = not_found(as_numpy(last.object_tril))  # judged on the uncalibrated belief
-        last = self.calibration.apply(last, torch.as_tensor(mask, device=self.device))
-        return Estimates(as_numpy(last.agent_mean), _covariance(last.agent_tril), as_numpy(last.heading),
-                         as_numpy(last.kappa), as_numpy(last.object_mean), _covariance(last.object_tril),
-                         self.calibration.lost(mask).astype(np.float32), searching)
+        return stated_estimates(last, object_classes, held, self.fitted.scales, self.fitted.stated, search)
 
 
 def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str, Any] | None = None,
@@ -190,30 +168,28 @@ def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str
     saved = load_checkpoint(path, expected or {}, device)
     version = str(saved["dataset_version"])
     beside = path.parent / CALIBRATION_FILE
-    calibration = read_calibration(beside, version) if calibrated else Calibration(
-        data_association=bool(data_association))
-    if data_association is not None and data_association != calibration.data_association:
-        raise MorError(f"{beside}: fitted with data_association {calibration.data_association} but this run's is "
+    fitted = read_calibration(beside, version) if calibrated else FittedCalibration(
+        tracking=TrackingSettings(data_association=bool(data_association)))
+    if data_association is not None and data_association != fitted.tracking.data_association:
+        raise MorError(f"{beside}: fitted with data_association {fitted.tracking.data_association} but this run's is "
                        f"{data_association} (lnet.data_association); run mor calibrate-lnet")
     model = model_from_checkpoint(saved, device)
-    model.use_data_association(calibration.data_association)
-    model.use_measurement_noise(calibration.noise_own, calibration.noise_shared)
     model.use_encoder_precision(encoder_precision)
-    return LNetRunner(model, calibration, int(saved["image_size"]), version, device, file_digest(path), compiled)
+    return LNetRunner(model, fitted, int(saved["image_size"]), version, device, file_digest(path), compiled)
 
 
-def lnet_identity(dataset_version: str, checkpoint_digest: str | None, calibration: Calibration,
+def lnet_identity(dataset_version: str, checkpoint_digest: str | None, fitted: FittedCalibration,
                   encoder_precision: str = "float32") -> str:
     """The dataset version; for a loaded checkpoint, the first 12 hex digits of its file's SHA-256 (another training
-    run is another L-Net); unless it is the identity calibration, ``-cal`` and 8 hex digits of the calibration
-    (another tracking rule or other scales give other estimates: what a policy reads changes; the objects' lost
-    probabilities, ``Estimates.object_lost``, and the search belief's find probability are left out: no policy
-    reads them); and ``-bf16`` for
-    a bfloat16 encoder (its estimates differ a little from float32's)."""
+    run is another L-Net); unless the scales and the tracking settings are the defaults, ``-cal`` and 8 hex digits
+    of them (another tracking rule or other scales give other estimates: what a policy reads changes; the stated
+    belief's parameters, ``fitted.stated``, are left out: no policy reads them); and ``-bf16`` for a bfloat16
+    encoder (its estimates differ a little from float32's)."""
     identity = dataset_version if checkpoint_digest is None else f"{dataset_version}-{checkpoint_digest}"
-    read = replace(calibration, lost_own=0.0, lost_shared=None, search_find=None)  # what no policy reads
-    if read != Calibration():
-        hashed = {k: v for k, v in asdict(read).items() if k != "search_find"}  # added later: old hashes stand
+    if (fitted.scales, fitted.tracking) != (Calibration(), TrackingSettings()):
+        # The fields one Calibration record held when the hash was introduced, the lost probabilities at their
+        # defaults: every identity recorded since stands (docs/assumptions.md, "L-Net identity").
+        hashed = {**asdict(fitted.scales), **asdict(fitted.tracking), "lost_own": 0.0, "lost_shared": None}
         identity += "-cal" + hashlib.sha256(json.dumps(hashed, sort_keys=True).encode()).hexdigest()[:8]
     return identity + ("-bf16" if encoder_precision == "bfloat16" else "")
 
@@ -232,4 +208,4 @@ def checkpoint_identity(path: Path, encoder_precision: str = "float32") -> str:
     version = str(saved["dataset_version"])
     beside = path.parent / CALIBRATION_FILE
     return lnet_identity(version, file_digest(path), read_calibration(beside, version) if beside.is_file()
-                         else Calibration(), encoder_precision)
+                         else FittedCalibration(), encoder_precision)

@@ -8,10 +8,9 @@ the estimated camera cone (``rules.CAMERA_FOV``, from the tracked agent pose) in
     p(x) proportional to (1 - q)^c(x)        (q: the probability that one look finds the object)
 
 so q = 0 is the uniform arena and q = 1 rules out every place looked at. q is fitted on validation
-(``lnet.calibration``: ``search_miss`` in ``calibration.json``, by the coverage criterion); occlusion and the
-PoseNet's misses of far objects are what keep it below 1. A belief counts as *not found* while its (uncalibrated)
-geometric-mean standard deviation is above ``NOT_FOUND_SIGMA``: the filter's prior is about 1.7 m wide and one
-sighting brings a belief to tenths of a metre.
+(``mor.lnet.calibration_fit``: ``search_find`` in ``calibration.json``, by the calibration's criterion); occlusion
+and the PoseNet's misses of far objects are what keep it below 1. Which beliefs have not found their object, and so
+are stated by this belief, is the stated belief's call (``mor.lnet.stated.not_found``).
 
 The belief is flat wherever the look counts tie, so its highest-density region of mass p is not unique: the truth
 is counted inside it by the randomized probability integral transform (Czado, Gneiting & Held 2009), mass =
@@ -33,8 +32,6 @@ from mor.lnet.lost import arena_grid
 from mor.sim.arena import Arena
 from mor.sim.rules import CAMERA_FOV
 
-#: A belief wider than this (m, geometric mean of its standard deviations, uncalibrated) has not found its object.
-NOT_FOUND_SIGMA = 1.0
 #: Look counts above this are counted as this many ((1 - q)^64 < 0.002 for the q the fit can choose above 0.1).
 MAX_LOOKS = 64
 #: The one-look find probabilities q the calibration chooses from.
@@ -121,16 +118,10 @@ def search_log_density(looks: SearchLooks, find: float) -> np.ndarray:
         return np.log(weights[looks.truth_looks] / total) - math.log(looks.cell_area)
 
 
-def not_found(object_tril: np.ndarray) -> np.ndarray:
-    """(...) whether each belief (lower Cholesky factors (..., 2, 2), uncalibrated) has not found its object."""
-    return np.sqrt(np.abs(object_tril[..., 0, 0] * object_tril[..., 1, 1])) > NOT_FOUND_SIGMA
-
-
-
 class SearchMap:
     """The search belief in a running loop: per environment, the look counts of the arena grid, updated once per
-    frame from the streaming step's estimated pose (``LNetRunner.step``), for the objects whose
-    ``Estimates.object_searching`` is True.
+    frame from the streaming step's estimated pose (kept by ``mor.lnet.streaming.StreamingTracker`` given the
+    arena), for the objects whose ``Estimates.object_searching`` is True.
 
     grid (M, 2) the arena grid's points (m); counts (N, M) how many frames of the episode so far each point was in
     view (capped at ``MAX_LOOKS``); cell_area (m^2) the area one point stands for.
@@ -151,6 +142,6 @@ class SearchMap:
 
     def density(self, find: float) -> np.ndarray:
         """(N, M) the search belief's density (per m^2) at the grid points, for one-look find probability ``find``
-        (``Calibration.search_find``)."""
+        (``mor.lnet.stated.StatedParams.search_find``)."""
         weights = (1.0 - find) ** self.counts
         return weights / (weights.sum(1, keepdims=True) * self.cell_area)

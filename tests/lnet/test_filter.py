@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from mor.lnet.filter import BeliefFilter, associate, cholesky_2x2
+from mor.lnet.filter import BeliefFilter, TrackingSettings, associate, cholesky_2x2
 from mor.sim.rules import DROP_DISTANCE
 
 TIGHT = 1e-3  # metres: a near-exact measurement
@@ -24,7 +24,7 @@ def _ego(points: list[tuple[float, float]]) -> tuple[torch.Tensor, torch.Tensor]
 
 @torch.no_grad()
 def _run(steps: list[dict], data_association: bool = False) -> list[tuple[torch.Tensor, ...]]:
-    belief = BeliefFilter(n_slots=2, data_association=data_association)
+    belief = BeliefFilter(n_slots=2, tracking=TrackingSettings(data_association=data_association))
     state = belief.initial_state(1)
     states = []
     for step in steps:
@@ -107,8 +107,7 @@ def test_cholesky_2x2_reproduces_the_covariance() -> None:
 
 @torch.no_grad()
 def test_measurement_noise_multipliers_trust_objects_of_their_own_colour_more_than_shared_ones() -> None:
-    belief = BeliefFilter(n_slots=2)
-    belief.measurement_noise = (0.25, 16.0)  # (own colour, shared colour)
+    belief = BeliefFilter(n_slots=2, tracking=TrackingSettings(noise_own=0.25, noise_shared=16.0))
     ego = (torch.tensor([[(2.0, 1.0), (2.0, -1.0)]]), (0.5 * torch.eye(2)).expand(1, 2, 2, 2))
     state = belief.step(belief.initial_state(1), _fix(0.0, 0.0, 0.0), ego, torch.tensor([[1.0, 1.0]]),
                         torch.tensor([-1]), torch.tensor([-1]), shared=torch.tensor([[True, False]]))

@@ -4,7 +4,7 @@ objects' lost probabilities: mor.lnet.lost)."""
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -12,20 +12,17 @@ import pytest
 import torch
 
 from mor.errors import MorError
-from mor.lnet.calibration import Calibration, read_calibration
-from mor.lnet.evaluate import (
-    NOMINAL_2D,
-    Predictions,
-    calibrated_metrics,
-    fit_calibration,
-    metrics,
-    stated_inputs,
-)
+from mor.lnet.calibration import Calibration
+from mor.lnet.calibration_file import FittedCalibration, read_calibration
+from mor.lnet.calibration_fit import fit_calibration
+from mor.lnet.evaluate import NOMINAL_2D, calibrated_metrics, metrics
 from mor.lnet.frames import ego_to_world, world_to_ego
 from mor.lnet.loss import lnet_loss, nll_terms, previous_actions
 from mor.lnet.lost import arena_shares, fit_nll, log_density, region_mass
 from mor.lnet.model import LNet, ObjectAttention
 from mor.lnet.params import LNetConfig
+from mor.lnet.predictions import Predictions
+from mor.lnet.stated import StatedParams, stated_inputs
 from mor.sim import geometry
 from mor.sim.arena import Arena
 
@@ -153,7 +150,7 @@ def _predictions(n: int, true_scale: float, stated_scale: float) -> Predictions:
 def test_calibration_repairs_overconfidence(criterion: str) -> None:
     predictions = _predictions(4000, true_scale=0.2, stated_scale=0.1)  # stated sigma half the true one
     before = metrics(predictions)["coverage"]["agent_position"]["2sigma"]
-    calibration = fit_calibration(predictions, criterion)  # Gaussian errors: both criteria find the same scales
+    calibration = fit_calibration(predictions, criterion).scales  # Gaussian errors: both criteria agree
     assert calibration.agent_scale == pytest.approx(2.0, rel=0.05)
     assert calibration.object_scale == pytest.approx(2.0, rel=0.05)
     assert calibration.kappa_scale == pytest.approx(0.25, rel=0.1)  # kappa 400 stated, 100 true
@@ -177,7 +174,7 @@ def test_the_coverage_criterion_trades_the_nll_for_coverage_on_heavy_tailed_erro
         coverage = scored["coverage"]["objects_seen"]
         return max(abs(coverage[f"{k}sigma"] - NOMINAL_2D[k]) for k in (1, 2, 3)), scored["nll"]["objects"]
 
-    (nll_worst, nll_nll), (coverage_worst, coverage_nll) = (worst(fit_calibration(predictions, c))
+    (nll_worst, nll_nll), (coverage_worst, coverage_nll) = (worst(fit_calibration(predictions, c).scales)
                                                             for c in ("nll", "coverage"))
     assert coverage_worst < nll_worst and nll_nll < coverage_nll  # each wins on what it optimizes
     with pytest.raises(ValueError, match="calibration criterion: expected one of"):
@@ -190,7 +187,7 @@ def test_objects_sharing_their_colour_get_their_own_scale() -> None:
     shared[:, 0] = True  # slot 0 shares its colour; its errors are three times larger
     predictions = replace(predictions, confusable=shared, object_mean=predictions.object_mean + np.where(
         shared[..., None], 2.0 * (predictions.object_mean - predictions.object_truth), 0.0))
-    calibration = fit_calibration(predictions)
+    calibration = fit_calibration(predictions).scales
     assert calibration.object_scale == pytest.approx(2.0, rel=0.05)
     assert calibration.shared_colour_scale == pytest.approx(6.0, rel=0.05)
     scaled = calibration.apply(predictions, predictions.confusable).object_tril
@@ -277,14 +274,14 @@ def test_without_a_lost_probability_the_stated_belief_is_the_gaussian() -> None:
     assert log_density(far, np.zeros(1), 0.0, 36.0)[0] == pytest.approx(-1500.0 - np.log(2.0 * np.pi))
     assert log_density(far, np.zeros(1), 1.0, 36.0)[0] == pytest.approx(-np.log(36.0))  # all lost: uniform
     predictions = _predictions(500, true_scale=0.2, stated_scale=0.1)
-    scored = calibrated_metrics(predictions, Calibration(object_scale=2.0))
+    scored = calibrated_metrics(predictions, FittedCalibration(Calibration(object_scale=2.0)))
     assert scored["stated"]["nll_objects"] == pytest.approx(scored["nll"]["objects"], rel=1e-6)
     for k in (1, 2, 3):
         assert scored["stated"]["coverage"]["objects_seen"][f"{k}sigma"] == scored["coverage"]["objects_seen"][
             f"{k}sigma"]
-    for needs_inputs in (Calibration(lost_own=0.1), Calibration(search_find=0.5)):
+    for needs_inputs in (StatedParams(lost_own=0.1), StatedParams(search_find=0.5)):
         with pytest.raises(ValueError, match="StatedInputs"):
-            calibrated_metrics(predictions, needs_inputs)
+            calibrated_metrics(predictions, FittedCalibration(stated=needs_inputs))
 
 
 def test_em_recovers_the_scale_and_the_lost_probability() -> None:
@@ -301,10 +298,10 @@ def test_lost_probabilities_make_a_heavy_tail_honest_where_no_gaussian_scale_can
     fit_on, test_on = _lost_predictions(3000, lost=0.2, seed=1), _lost_predictions(3000, lost=0.2, seed=2)
     gaussian = fit_calibration(fit_on, criterion)
     lost = fit_calibration(fit_on, criterion, stated_inputs(fit_on, ARENA))
-    assert gaussian.lost_own == 0.0 and lost.lost_own == pytest.approx(0.2, abs=0.04)
+    assert gaussian.stated.lost_own == 0.0 and lost.stated.lost_own == pytest.approx(0.2, abs=0.04)
     shares = stated_inputs(test_on, ARENA)
 
-    def worst(calibration: Calibration) -> float:
+    def worst(calibration: FittedCalibration) -> float:
         coverage = calibrated_metrics(test_on, calibration, shares)["stated"]["coverage"]["objects_seen"]
         return max(abs(coverage[f"{k}sigma"] - NOMINAL_2D[k]) for k in (1, 2, 3))
 
@@ -312,11 +309,23 @@ def test_lost_probabilities_make_a_heavy_tail_honest_where_no_gaussian_scale_can
 
 
 def test_a_calibration_file_keeps_its_lost_probabilities_and_refuses_impossible_ones(tmp_path: Path) -> None:
-    calibration = Calibration(object_scale=1.5, shared_colour_scale=3.0, lost_own=0.05, lost_shared=0.3)
+    calibration = FittedCalibration(Calibration(object_scale=1.5, shared_colour_scale=3.0),
+                                     stated=StatedParams(lost_own=0.05, lost_shared=0.3))
     path = tmp_path / "calibration.json"
-    path.write_text(json.dumps(asdict(calibration)))
+    path.write_text(json.dumps(calibration.values()))
     assert read_calibration(path) == calibration
-    assert calibration.lost(np.array([[True, False]])).tolist() == [[0.3, 0.05]]
-    path.write_text(json.dumps(asdict(replace(calibration, lost_shared=1.0))))
+    assert calibration.stated.lost(np.array([[True, False]])).tolist() == [[0.3, 0.05]]
+    path.write_text(json.dumps(calibration.values() | {"lost_shared": 1.0}))
     with pytest.raises(MorError, match="lost_own and lost_shared must lie in"):
         read_calibration(path)
+
+
+def test_the_committed_calibration_files_read_as_written() -> None:
+    """Every committed calibration.json (main and settings) reads into the three records, which give back its
+    fields as they are in the file."""
+    root = Path(__file__).parents[2]
+    committed = [root / "cards/lnet/calibration.json", *root.glob("settings/*/cards/lnet/calibration.json")]
+    for path in committed:
+        values, written = json.loads(path.read_text()), read_calibration(path).values()
+        assert {key: values[key] for key in written if key in values} == {
+            key: written[key] for key in written if key in values}

@@ -13,12 +13,14 @@ import torch
 
 import mor.sim  # noqa: F401 - registers the envs
 from mor.errors import MorError
-from mor.lnet.calibration import CALIBRATION_FILE, Calibration
+from mor.lnet.calibration import Calibration
+from mor.lnet.calibration_file import CALIBRATION_FILE, FittedCalibration
 from mor.lnet.checkpoint import CheckpointMismatch, signature
+from mor.lnet.filter import TrackingSettings
 from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig, LNetParams
-from mor.lnet.runtime import LNetRunner, ObservationMismatch, checkpoint_identity, load_lnet
-from mor.lnet.search import not_found
+from mor.lnet.runtime import LNetRunner, ObservationMismatch, checkpoint_identity, lnet_identity, load_lnet
+from mor.lnet.stated import StatedParams, not_found
 
 SMALL = LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)
 SIZE = 16
@@ -27,9 +29,9 @@ SIZE = 16
 TRACKERS = [SMALL, SMALL.model_copy(update={"tracker": "filter", "visibility": True})]
 
 
-def _runner(calibration: Calibration = Calibration(), config: LNetConfig = SMALL) -> LNetRunner:
+def _runner(fitted: FittedCalibration = FittedCalibration(), config: LNetConfig = SMALL) -> LNetRunner:
     torch.manual_seed(0)
-    return LNetRunner(LNet(config), calibration, SIZE, "test")
+    return LNetRunner(LNet(config), fitted, SIZE, "test")
 
 
 def _rollouts(n_envs: int, steps: int) -> list[dict[str, np.ndarray]]:
@@ -55,8 +57,7 @@ def _previous(frames: list[dict[str, np.ndarray]], t: int) -> np.ndarray:
 
 @pytest.mark.parametrize("config", TRACKERS, ids=["lstm", "filter"])
 def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration(config: LNetConfig) -> None:
-    calibration = Calibration(agent_scale=2.0, object_scale=0.5, kappa_scale=3.0)
-    runner = _runner(calibration, config)
+    runner = _runner(FittedCalibration(Calibration(agent_scale=2.0, object_scale=0.5, kappa_scale=3.0)), config)
     frames = _rollouts(n_envs=3, steps=5)
     state = runner.initial_state(3)
     for t, frame in enumerate(frames):
@@ -71,7 +72,9 @@ def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration(conf
     assert estimates.object_mean.shape == (3, 2, 2) and estimates.object_cov.shape == (3, 2, 2, 2)
     assert estimates.agent_cov.shape == (3, 2, 2) and estimates.heading_kappa.shape == (3,)
     assert estimates.object_lost.shape == (3, 2) and not estimates.object_lost.any()  # none fitted
-    assert all(v.dtype == np.float32 for k, v in vars(estimates).items() if k != "object_searching")
+    assert estimates.search_density is None  # no looks kept (mor.lnet.streaming keeps them given the arena)
+    assert all(v.dtype == np.float32 for k, v in vars(estimates).items()
+               if k not in ("object_searching", "search_density"))
     uncalibrated = tracked.object_tril[:, -1, :2].numpy()  # 'not found' is judged before the calibration's x 0.5
     np.testing.assert_array_equal(estimates.object_searching, not_found(uncalibrated))
     np.testing.assert_allclose(estimates.agent_mean, tracked.agent_mean[:, -1].numpy(), atol=1e-5)
@@ -86,7 +89,8 @@ def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration(conf
 
 
 def test_the_streaming_step_scales_confusable_objects_by_their_own_scale_unless_held() -> None:
-    runner = _runner(Calibration(object_scale=0.5, shared_colour_scale=2.0, lost_own=0.05, lost_shared=0.3))
+    runner = _runner(FittedCalibration(Calibration(object_scale=0.5, shared_colour_scale=2.0),
+                                       stated=StatedParams(lost_own=0.05, lost_shared=0.3)))
     frame = _rollouts(n_envs=1, steps=1)[0]
     classes = np.array([[2, 8]])  # a blue cube and a blue sphere: confusable
     for held, scales in ((np.array([2]), (2.0, 2.0)), (np.array([1]), (2.0, 0.5))):  # nothing held; the sphere
@@ -137,7 +141,7 @@ def test_the_committed_model_loads_with_one_call_and_checks_what_it_was_made_wit
     runner = load_lnet(committed)
     saved = torch.load(committed, weights_only=False)
     assert runner.image_size == saved["image_size"] and runner.dataset_version == saved["dataset_version"]
-    assert runner.calibration.agent_scale == json.loads((committed.parent / CALIBRATION_FILE).read_text())[
+    assert runner.fitted.scales.agent_scale == json.loads((committed.parent / CALIBRATION_FILE).read_text())[
         "agent_scale"]
     other = LNetConfig(**saved["config"]).model_copy(update={"lstm_hidden": 8})
     with pytest.raises(CheckpointMismatch, match="checkpoint config is .*lstm_hidden.* but this run's is"):
@@ -148,7 +152,7 @@ def test_the_committed_model_loads_with_one_call_and_checks_what_it_was_made_wit
     shutil.copyfile(committed, alone)
     with pytest.raises(MorError, match="no calibration beside the checkpoint"):
         load_lnet(alone)
-    assert load_lnet(alone, calibrated=False).calibration == Calibration()
+    assert load_lnet(alone, calibrated=False).fitted == FittedCalibration()
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({"agent_scale": 1, "object_scale": 1, "kappa_scale": 1,
                                                          "dataset_version": "elsewhere"}))
     with pytest.raises(MorError, match="calibration dataset_version is elsewhere but the checkpoint's is"):
@@ -191,33 +195,52 @@ def test_the_tracking_rule_follows_the_calibration_and_a_mismatch_is_one_clear_e
     scales = {"agent_scale": 1, "object_scale": 1, "kappa_scale": 1, "dataset_version": "v"}
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True}))
     runner = load_lnet(checkpoint)
-    assert runner.model.filter.data_association and "-cal" in runner.identity
+    assert runner.model.tracking.data_association and "-cal" in runner.identity
     assert checkpoint_identity(checkpoint) == runner.identity
     with pytest.raises(MorError, match="fitted with data_association True but this run's is False"):
         load_lnet(checkpoint, data_association=False)
-    assert not load_lnet(checkpoint, calibrated=False).model.filter.data_association
+    assert not load_lnet(checkpoint, calibrated=False).model.tracking.data_association
     # the measurement noise the calibration was fitted with is the one tracked with; another calibration, another
     # identity (a policy trained through the first is stale for the second)
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True, "noise_own": 0.5,
                                                          "noise_shared": 4.0, "shared_colour_scale": 2.0}))
     noisy = load_lnet(checkpoint)
-    assert noisy.model.filter.measurement_noise == (0.5, 4.0) and noisy.calibration.shared_colour_scale == 2.0
+    assert noisy.model.tracking == TrackingSettings(True, 0.5, 4.0)
+    assert noisy.fitted.scales.shared_colour_scale == 2.0
     assert noisy.identity != runner.identity and checkpoint_identity(checkpoint) == noisy.identity
-    assert load_lnet(checkpoint, calibrated=False).model.filter.measurement_noise == (1.0, 1.0)
+    assert load_lnet(checkpoint, calibrated=False).model.tracking == TrackingSettings()
     # the objects' lost probabilities are no part of it: no policy reads them
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True, "noise_own": 0.5,
                                                          "noise_shared": 4.0, "shared_colour_scale": 2.0,
                                                          "lost_own": 0.1, "lost_shared": 0.3}))
     lost = load_lnet(checkpoint)
-    assert lost.calibration.lost_shared == 0.3 and lost.identity == noisy.identity
+    assert lost.fitted.stated.lost_shared == 0.3 and lost.identity == noisy.identity
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps(scales))  # a file from before the rule: fitted without it
-    assert not load_lnet(checkpoint).model.filter.data_association
+    assert not load_lnet(checkpoint).model.tracking.data_association
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": "yes"}))
     with pytest.raises(MorError, match="data_association must be true or false"):
         load_lnet(checkpoint)
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "object_scale": float("nan")}))
     with pytest.raises(MorError, match="scales must be positive and finite"):
         load_lnet(checkpoint)
+
+
+def test_tracking_settings_other_than_the_defaults_need_the_filter_tracker() -> None:
+    lstm = LNet(SMALL)
+    lstm.use_tracking(TrackingSettings())  # the defaults: nothing to set
+    assert lstm.tracking == TrackingSettings()
+    with pytest.raises(ValueError, match="tracking settings need the filter tracker"):
+        lstm.use_tracking(TrackingSettings(data_association=True))
+
+
+def test_the_identity_hashes_the_scales_and_tracking_settings_as_it_always_has() -> None:
+    """The hash one Calibration record of every field gave before the records were split (the stated belief's
+    parameters left out): identities recorded by trained policies and results rows stand."""
+    fitted = FittedCalibration(Calibration(agent_scale=2.0, shared_colour_scale=1.5),
+                               TrackingSettings(data_association=True, noise_own=0.5),
+                               StatedParams(lost_own=0.1, search_find=0.3))
+    assert lnet_identity("v", "abc", fitted) == "v-abc-cald128a5a5"
+    assert lnet_identity("v", "abc", FittedCalibration(stated=fitted.stated)) == "v-abc"
 
 
 def test_the_lnet_benchmark_counts_the_multiply_adds_of_a_frame_and_of_its_encoder() -> None:
@@ -235,7 +258,7 @@ def test_streaming_benchmark_times_the_environments_and_the_lnet_in_one_run() ->
     from mor.lnet.bench import benchmark_streaming  # noqa: PLC0415
     from mor.sim.config import SimConfig  # noqa: PLC0415
 
-    result = benchmark_streaming(LNet(SMALL), Calibration(), SimConfig(image_size=SIZE, n_objects=2), n_envs=2,
+    result = benchmark_streaming(LNet(SMALL), FittedCalibration(), SimConfig(image_size=SIZE, n_objects=2), n_envs=2,
                                  steps=3, repeats=2)
     assert len(result["runs_env"]) == len(result["runs_lnet"]) == len(result["compiled"]["runs_lnet"]) == 2
     assert result["lnet_over_env"] == pytest.approx(result["lnet_frames_per_s"] / result["env_frames_per_s"])
@@ -248,7 +271,8 @@ def test_streaming_benchmark_times_the_environments_and_the_lnet_in_one_run() ->
 
 
 def test_live_oracle_episodes_are_scored_like_the_test_split() -> None:
-    from mor.lnet.evaluate import metrics, predict_live  # noqa: PLC0415
+    from mor.lnet.evaluate import metrics  # noqa: PLC0415
+    from mor.lnet.predict import predict_live  # noqa: PLC0415
     from mor.sim.config import SimConfig  # noqa: PLC0415
 
     runner = _runner(config=TRACKERS[1])
@@ -262,7 +286,7 @@ def test_live_oracle_episodes_are_scored_like_the_test_split() -> None:
 
 
 def test_steps_since_seen_counts_from_the_last_sighting_or_hold() -> None:
-    from mor.lnet.evaluate import steps_since_seen  # noqa: PLC0415
+    from mor.lnet.predictions import steps_since_seen  # noqa: PLC0415
 
     visible = np.array([[0, 0], [1, 0], [0, 0], [0, 0], [0, 0]], bool)
     held = np.array([-1, -1, -1, 1, -1])
@@ -270,7 +294,8 @@ def test_steps_since_seen_counts_from_the_last_sighting_or_hold() -> None:
 
 
 def test_error_of_objects_in_view_is_binned_by_their_distance_from_the_agent() -> None:
-    from mor.lnet.evaluate import error_by_distance_in_view, episode_predictions  # noqa: PLC0415
+    from mor.lnet.evaluate import error_by_distance_in_view  # noqa: PLC0415
+    from mor.lnet.predictions import episode_predictions  # noqa: PLC0415
 
     truth = np.array([[[0.5, 0.0], [2.5, 0.0]], [[0.5, 0.0], [6.5, 0.0]]])  # (T=2, K=2) m; the agent at the origin
     estimate = {"agent_mean": np.zeros((2, 2)), "agent_tril": np.tile(np.eye(2), (2, 1, 1)), "heading": np.zeros(2),
@@ -285,7 +310,7 @@ def test_error_of_objects_in_view_is_binned_by_their_distance_from_the_agent() -
 
 
 def test_story_picks_an_episode_with_a_pick_then_a_drop() -> None:
-    from mor.lnet.evaluate import story  # noqa: PLC0415
+    from mor.lnet.predictions import story  # noqa: PLC0415
 
     held = np.array([-1] * 6 + [-1, -1, 1, 1, 1, -1, -1])  # episode 1 picks object 1 at frame 2, drops at 5
     visible = np.zeros((13, 5), bool)

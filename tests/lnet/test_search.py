@@ -1,22 +1,23 @@
-"""The search belief of objects not found yet (mor.lnet.search): the camera cone, the look counts, and that an
-honest belief gets nominal coverage and its find probability back from the calibration."""
+"""The search belief of objects not found yet (mor.lnet.search, stated by mor.lnet.stated): the camera cone, the look
+counts, and that an honest belief gets nominal coverage and its find probability back from the calibration."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from mor.lnet.evaluate import NOMINAL_2D, SIGMAS, _search_fit
+from mor.lnet.calibration_fit import _search_fit
+from mor.lnet.evaluate import NOMINAL_2D, SIGMAS
 from mor.lnet.lost import arena_grid
 from mor.lnet.search import (
     SearchLooks,
     SearchMap,
     episode_looks,
     in_view,
-    not_found,
     search_log_density,
     search_mass,
 )
+from mor.lnet.stated import not_found
 from mor.sim.arena import Arena
 
 ARENA = Arena.build("square", 6.0)

@@ -9,9 +9,11 @@ import pytest
 import torch
 
 from mor.data.manifest import manifest_version, read_manifest
-from mor.lnet.evaluate import fit_calibration, metrics, predict
-from mor.lnet.params import LNetConfig, TrainParams
+from mor.lnet.calibration_fit import fit_calibration
 from mor.lnet.checkpoint import CheckpointMismatch, load_model, signature
+from mor.lnet.evaluate import metrics
+from mor.lnet.params import LNetConfig, TrainParams
+from mor.lnet.predict import predict
 from mor.lnet.train import BEST, CHECKPOINT, LOG, train
 
 CONFIG = LNetConfig(feature_dim=32, mlp_hidden=32, lstm_hidden=32)
@@ -107,6 +109,6 @@ def test_predict_calibrate_and_score_whole_episodes(tiny_dataset: tuple, tmp_pat
     model = load_model(tmp_path / BEST, signature(CONFIG, version, 16), torch.device("cpu"))
     predictions = predict(model, root / "test", 10, torch.device("cpu"), progress=False)
     assert len(predictions.frame) == sum(r["n_frames"] for r in rows if r["split"] == "test")
-    result = metrics(fit_calibration(predictions).apply(predictions, predictions.confusable))
+    result = metrics(fit_calibration(predictions).scales.apply(predictions, predictions.confusable))
     assert 0.0 <= result["coverage"]["agent_position"]["2sigma"] <= 1.0
     assert result["agent_position_error_m"]["median"] >= 0.0
