@@ -28,7 +28,7 @@ def lock_path(output: Path) -> Path:
 @contextmanager
 def writer_lock(output: Path, command: str) -> Iterator[None]:
     """Hold the lock of ``output`` for the block, recording this process and ``command`` (as a user would type it,
-    e.g. ``mor eval run --method gt_pose``) in it; MorError naming the holder when another process holds it."""
+    e.g. ``mor eval run --method M``) in it; MorError naming the holder when another process holds it."""
     output = Path(output)
     path = lock_path(output)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -22,6 +22,7 @@ from typer.core import TyperGroup
 
 from mor.config import DEFAULT_PARAMS, active_profile, load_profile
 from mor.errors import ConfigError, MorError
+from mor.policy.variants import VARIANTS
 from pipelines import paths
 
 
@@ -97,14 +98,15 @@ def _check_task(task: str) -> str:
     return _check_choice("--task", task, TASK_NAMES)
 
 
-def _parse_seeds(text: str) -> list[int]:
-    """``--seeds 0,1,2`` -> [0, 1, 2]; ConfigError unless the items are distinct non-negative integers."""
+def _parse_seeds(text: str, option: str = "--seeds") -> list[int]:
+    """``--seeds 0,1,2`` -> [0, 1, 2]; ConfigError (naming ``option``) unless the items are distinct non-negative
+    integers."""
     try:
         seeds = [int(item) for item in text.split(",")]
     except ValueError:
         seeds = []
     if not seeds or min(seeds) < 0 or len(set(seeds)) < len(seeds):
-        raise ConfigError(f"--seeds: expected distinct comma-separated non-negative integers such as 0,1,2 "
+        raise ConfigError(f"{option}: expected distinct comma-separated non-negative integers such as 0,1,2 "
                           f"(got {text!r})")
     return seeds
 
@@ -159,8 +161,8 @@ def sim_render(
 @sim_app.command("video")
 def sim_video(
     task: Annotated[str | None, typer.Option("--task", "-t", help="pick, drop or rearrange (default: the profile's).")] = None,
-    policy: Annotated[str | None, typer.Option(help="oracle, random, or a trained method: gt_pose, lnet, "
-                                                     "lnet_no_uncertainty, *_nearest_rule (default: the profile's).")] = None,
+    policy: Annotated[str | None, typer.Option(help=f"oracle, random, or a trained method: {', '.join(VARIANTS)}, "
+                                                     "*_nearest_rule (default: the profile's).")] = None,
     seed: Annotated[int | None, typer.Option(min=0, help="Episode seed (default: the profile's).")] = None,
     out: Annotated[Path, typer.Option(help="Video file: .mp4 or .gif.")] = Path("datasets/renders/demo.mp4"),
     profile: ProfileOption = None,
@@ -431,7 +433,8 @@ def bench_lnet(
     import torch
 
     from mor.lnet.bench import benchmark_lnet, benchmark_streaming
-    from mor.lnet.calibration import Calibration
+    from mor.lnet.calibration_file import FittedCalibration
+    from mor.lnet.filter import TrackingSettings
     from mor.lnet.model import LNet
     from mor.lnet.runtime import load_lnet
     from pipelines.io import write_json
@@ -443,14 +446,14 @@ def bench_lnet(
         typer.echo(f"{name}: {entry['frames_per_s']:.0f} frames/s")
     committed = paths.LNET_CARD / "model.pt"
     runner = load_lnet(committed) if committed.is_file() else None
-    if runner is not None and (runner.config, runner.image_size, runner.calibration.data_association) == (
+    if runner is not None and (runner.config, runner.image_size, runner.fitted.tracking.data_association) == (
             config.lnet.model, config.sim.image_size, config.lnet.data_association):
-        model, calibration, weights = runner.model, runner.calibration, committed.as_posix()
+        model, fitted, weights = runner.model, runner.fitted, committed.as_posix()
     else:  # none committed, or one of another config than this profile's
-        model, calibration = LNet(config.lnet.model), Calibration(data_association=config.lnet.data_association)
-        model.use_data_association(config.lnet.data_association)
+        model = LNet(config.lnet.model)
+        fitted = FittedCalibration(tracking=TrackingSettings(data_association=config.lnet.data_association))
         weights = "random"
-    streaming = result["streaming"] = benchmark_streaming(model, calibration, config.sim, n_envs, steps, repeats)
+    streaming = result["streaming"] = benchmark_streaming(model, fitted, config.sim, n_envs, steps, repeats)
     streaming["weights"] = weights
     typer.echo(f"streaming at batch {n_envs}: L-Net {streaming['lnet_frames_per_s']:.0f} frames/s, environments "
                f"{streaming['env_frames_per_s']:.0f} frames/s, ratio {streaming['lnet_over_env']:.2f}")

@@ -10,11 +10,11 @@ import typer
 from mor.config import DEFAULT_PARAMS, active_profile, load_profile, validated
 from mor.policy.params import EvalParams
 from mor.errors import ConfigError
-from mor.policy.names import BASELINE_VARIANTS, TASKS, VARIANTS
+from mor.policy.names import TASKS
+from mor.policy.variants import OURS, VARIANTS, Variant
 from pipelines import paths
-from pipelines.cli import ParamsOption, ProfileOption, RepeatsOption, app, bench_app, new_group
+from pipelines.cli import ParamsOption, ProfileOption, RepeatsOption, _parse_seeds, app, bench_app, new_group
 
-TRAINABLE = VARIANTS + BASELINE_VARIANTS
 policy_app = new_group("Policies: train the pick, drop and decision policies of an observation variant.")
 eval_app = new_group("Evaluation: score methods with the protocol and gather the results card.")
 app.add_typer(policy_app, name="policy")
@@ -23,23 +23,33 @@ app.add_typer(eval_app, name="eval")
 
 @policy_app.command("train")
 def policy_train(
-    variant: Annotated[str, typer.Option("--variant", "-v", help=f"One of {', '.join(TRAINABLE)}.")],
+    variant: Annotated[str, typer.Option("--variant", "-v", help=f"One of {', '.join(VARIANTS)}.")],
     task: Annotated[list[str] | None, typer.Option("--task", "-t", help="pick, drop, decision (repeat; default: all, "
                                                                          "in that order).")] = None,
+    seed: Annotated[str | None, typer.Option("--seed", help="Training seed(s), e.g. 0 or 0,1,2 (default: the "
+                                                            "profile's policy.training_seeds).")] = None,
+    jobs: Annotated[int, typer.Option(min=1, help="Seeds trained at once (worker processes or Ray tasks).")] = 1,
+    backend: Annotated[str, typer.Option(help="process (this machine) or ray (Ray tasks; a local Ray instance "
+                                              "unless one is running).")] = "process",
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
-    """Train (or resume) a variant's policies; outputs in datasets/policy/<variant>/ and cards/policy/<variant>/."""
+    """Train (or resume) a variant's policies, one run per training seed; outputs in datasets/policy/<variant>/ and
+    cards/policy/<variant>/ (seed S > 0: their seed_S/ folders)."""
     from pipelines import train_policy  # noqa: PLC0415
 
-    if variant not in TRAINABLE:
-        raise ConfigError(f"--variant: unknown variant {variant!r}; choose one of {', '.join(TRAINABLE)}")
+    chosen = _variant(variant)
     tasks = tuple(task or TASKS)
     for name in tasks:
         if name not in TASKS:
             raise ConfigError(f"--task: unknown task {name!r}; choose one of {', '.join(TASKS)}")
-    for summary in train_policy.run(load_profile(profile, params), variant, tasks):
-        typer.echo(f"{summary['label']}: {summary['steps']} steps; policy in {paths.POLICY_CARD / variant}")
+    if backend not in ("process", "ray"):
+        raise ConfigError(f"--backend: unknown backend {backend!r}; choose process or ray")
+    config = load_profile(profile, params)
+    seeds = _parse_seeds(seed, "--seed") if seed is not None else config.policy.training_seeds
+    for summaries in train_policy.run_seeds(config, chosen, tasks, seeds, jobs, backend):
+        for summary in summaries:
+            typer.echo(f"{summary['label']}: {summary['steps']} steps")
 
 
 @policy_app.command("plan")
@@ -55,15 +65,20 @@ def policy_plan(
 
     config = load_profile(profile, params)
     for name in variant or list(config.policy.variants):
-        if name not in TRAINABLE:
-            raise ConfigError(f"--variant: unknown variant {name!r}; choose one of {', '.join(TRAINABLE)}")
         typer.echo(f"{name}:")
-        for task_plan in train_policy.plan(config, name):
+        for task_plan in train_policy.plan(config, _variant(name), seed=config.policy.training_seeds[0]):
             ppo = task_plan.params.model_dump()
             steps = ppo.pop("steps")
             typer.echo(f"  {task_plan.task}: {steps:,} steps, {task_plan.why}"
                        + (f" ({task_plan.start})" if task_plan.start is not None else ""))
             typer.echo("    " + ", ".join(f"{key} {value}" for key, value in ppo.items()))
+
+
+def _variant(name: str) -> Variant:
+    """The variant ``--variant`` names; one error line listing the known ones otherwise."""
+    if name not in VARIANTS:
+        raise ConfigError(f"--variant: unknown variant {name!r}; choose one of {', '.join(VARIANTS)}")
+    return VARIANTS[name]
 
 
 @policy_app.command("convert")
@@ -74,14 +89,14 @@ def policy_convert(
     """Convert policy files from SB3's pickled format to MOR's safe one, once. This UNPICKLES them (it runs what
     they contain): only for files you trust, such as the ones this repository committed. The weights come out
     bit-identical, and the results rows that recorded the old files' digests are re-pointed at the new ones."""
-    from pipelines import train_policy  # noqa: PLC0415
+    from pipelines import convert_policies  # noqa: PLC0415
 
     targets = files or sorted([*paths.POLICY_CARD.glob("*/*/policy.pth"),
                                *paths.SETTINGS.glob(f"*/{paths.POLICY_CARD}/*/*/policy.pth")])
     for path in targets:
         if not path.is_file():
             raise ConfigError(f"{path}: no such policy file")
-    converted = train_policy.convert_policies(targets)
+    converted = convert_policies.run(targets)
     for path, old, new in converted:
         typer.echo(f"converted {path} (digest {old} -> {new}; weights identical)")
     typer.echo(f"{len(converted)} of {len(targets)} policy files converted; the others were already safe")
@@ -89,10 +104,14 @@ def policy_convert(
 
 @eval_app.command("run")
 def eval_run(
-    method: Annotated[str, typer.Option("--method", "-m", help="gt_pose, lnet, lnet_no_uncertainty, "
-                                                                "*_nearest_rule, baseline_*, oracle or random.")],
+    method: Annotated[str, typer.Option("--method", "-m", help=f"A variant ({', '.join(VARIANTS)}), "
+                                                                "*_nearest_rule, oracle or random.")],
     zero_shot: Annotated[bool, typer.Option("--zero-shot", help="In a setting (mor --setting NAME ...): play the "
                                                                 "main workspace's policies (paper Table 3).")] = False,
+    training_seed: Annotated[int, typer.Option("--training-seed", min=0, help="Play the policies of this training "
+                                                                              "run (mor policy train --seed).")] = 0,
+    seeds: Annotated[str | None, typer.Option(help="Evaluation seeds outside the protocol, e.g. 100,101 (held-out "
+                                                   "episodes: the row says episodes held_out).")] = None,
     workers: Annotated[int | None, typer.Option(min=1, help="Jobs (one per task and seed) at once (default: the "
                                                             "profile's evaluate.workers).")] = None,
     backend: Annotated[str | None, typer.Option(help="process (this machine) or ray (Ray tasks; a local Ray "
@@ -105,11 +124,17 @@ def eval_run(
 
     name = active_profile(profile, params)
     config = load_profile(name, params)
-    overrides = {key: value for key, value in (("workers", workers), ("backend", backend)) if value is not None}
+    held_out = _parse_seeds(seeds) if seeds is not None else None
+    if held_out is not None and set(held_out) & set(config.evaluate.seeds):
+        raise ConfigError(f"--seeds: {sorted(set(held_out) & set(config.evaluate.seeds))} are the protocol's own "
+                          f"evaluation seeds ({config.evaluate.seeds}); held-out seeds must differ")
+    overrides = {key: value for key, value in (("workers", workers), ("backend", backend), ("seeds", held_out))
+                 if value is not None}
     if overrides:
         config = config.model_copy(update={"evaluate": validated(
-            EvalParams, "--workers/--backend", **{**config.evaluate.model_dump(), **overrides})})
-    row = evaluate.run(config, name, method, zero_shot=zero_shot)
+            EvalParams, "--workers/--backend/--seeds", **{**config.evaluate.model_dump(), **overrides})})
+    row = evaluate.run(config, name, method, zero_shot=zero_shot, training_seed=training_seed,
+                       held_out=held_out is not None)
     summary = ", ".join(f"{k} {v['mean']:.3f} ± {v['std']:.3f}" for k, v in row["metrics"].items())
     typer.echo(f"{method}: {summary}")
 
@@ -130,14 +155,16 @@ def bench_policy_command(
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
-    """Env steps/s without rendering (gt_pose) and with rendering + the L-Net, and PPO training steps/s for gt_pose
-    and lnet, all in one run (the profile's pick PPO settings; the committed L-Net)."""
+    """Env steps/s without rendering (the ground truth's path) and with rendering + the L-Net, and PPO training
+    steps/s on both, all in one run (the profile's pick PPO settings; the committed L-Net)."""
     from mor.policy.bench import bench_policy  # noqa: PLC0415
     from pipelines.io import write_json  # noqa: PLC0415
-    from pipelines.committed_lnet import lnet_runner  # noqa: PLC0415
+    from mor.policy.workspace import committed_lnet  # noqa: PLC0415
+    from pipelines.workspaces import workspace_record  # noqa: PLC0415
 
     config = load_profile(profile, params)
-    result = bench_policy(config.sim, config.policy.pick, lnet_runner("lnet", config), seconds, repeats)
+    runner = committed_lnet(workspace_record(Path("."), config), OURS, config.lnet)
+    result = bench_policy(config.sim, config.policy.pick, runner, seconds, repeats)
     typer.echo(", ".join(f"{k} {v:.0f} steps/s" for k, v in result["steps_per_second"].items()))
     typer.echo(f"wrote {write_json(out, result)}")
 

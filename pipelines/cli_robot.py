@@ -10,6 +10,7 @@ import typer
 
 from mor.config import DEFAULT_PARAMS, load_profile
 from mor.errors import ConfigError
+from mor.policy.variants import GROUND_TRUTH, POSE_VARIANTS
 from pipelines import paths
 from pipelines.cli import (ParamsOption, ProfileOption, RepeatsOption, _parse_seeds, app, bench_app, new_group,
                            parse_objects)
@@ -20,15 +21,15 @@ if TYPE_CHECKING:
 robot_app = new_group("The robot controller: sim-as-robot runs, replays of recordings, a live ROS 2 node.")
 app.add_typer(robot_app, name="robot")
 
-MethodOption = Annotated[str, typer.Option("--method", "-m", help="gt_pose, lnet, lnet_no_uncertainty or "
-                                                                   "*_nearest_rule.")]
+MethodOption = Annotated[str, typer.Option("--method", "-m", help=f"A method that reads a pose belief: one of "
+                                                                   f"{', '.join(POSE_VARIANTS)} or *_nearest_rule.")]
 
 
 @robot_app.command("sim")
 def robot_sim(
     loop: Annotated[str, typer.Option(help="aruco_topdown (poses from the top camera's tags) or fpv_lnet (the "
                                            "first-person frames through the L-Net).")] = "aruco_topdown",
-    method: MethodOption = "gt_pose",
+    method: MethodOption = GROUND_TRUTH.name,
     seeds: Annotated[str | None, typer.Option(help="Evaluation seeds, e.g. 0,1 (default: the profile's).")] = None,
     episodes: Annotated[int | None, typer.Option(min=1, help="Episodes per seed (default: the profile's).")] = None,
     profile: ProfileOption = None,
@@ -86,7 +87,7 @@ def _check_source(source: str) -> str:
 def robot_replay(
     bag: Annotated[Path, typer.Argument(help="A recorded run: a rosbag2 MCAP (a controller's recording or a "
                                              "TurtleBot bag with the top camera).")],
-    method: MethodOption = "gt_pose",
+    method: MethodOption = GROUND_TRUTH.name,
     source: SourceOption = "aruco",
     object_classes: ObjectsOption = None,
     targets: TargetsOption = None,
@@ -127,7 +128,7 @@ def robot_run(
     object_classes: Annotated[str, typer.Option("--object-classes", help="Class id of each object, comma-separated "
                                                                          "(e.g. 0,7,13).")],
     targets: Annotated[str, typer.Option(help="Target x,y of each object in metres, ';'-separated.")],
-    method: MethodOption = "gt_pose",
+    method: MethodOption = GROUND_TRUTH.name,
     source: SourceOption = "aruco",
     seed: Annotated[int, typer.Option(min=0, help="Seed of the skills' draws.")] = 0,
     max_steps: Annotated[int, typer.Option(min=1, help="Stop after this many actions.")] = 1000,
@@ -153,8 +154,8 @@ def bench_robot(
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
-    """The controller's step on one core (torch.set_num_threads(1)): ArUco detection + gt_pose policy, and the
-    L-Net's step + lnet policy; medians in ms against the 50 ms target; and the tags' pose errors on those frames."""
+    """The controller's step on one core (torch.set_num_threads(1)): ArUco detection + the ground truth's policy,
+    and the L-Net's step + ours; medians in ms against the 50 ms target; and the tags' pose errors on those frames."""
     os.environ.setdefault("LP_NUM_THREADS", "1")
     from mor.config import validated  # noqa: PLC0415
     from mor.sim.tags import TopCamera  # noqa: PLC0415

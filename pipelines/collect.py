@@ -8,11 +8,10 @@ from typing import Any
 
 from mor.config import Profile
 from mor.data.collect import collect
-from mor.errors import ConfigError
 from mor.locking import writer_lock
 from pipelines import paths
 from pipelines.io import write_json
-from pipelines.shapes import collection_spec, profile_shape
+from pipelines.shapes import profile_shape
 
 
 def rejected_files(report: Path | None, out_dir: Path) -> set[str]:

@@ -12,36 +12,38 @@ import numpy as np
 
 from mor.config import Profile
 from mor.errors import ConfigError
-from mor.eval.methods import method_spec
+from mor.eval.methods import METHODS, method_spec
 from mor.locking import writer_lock
 from mor.robot.bench import benchmark_robot
 from mor.robot.card import write_robot_card
 from mor.robot.controller import Controller
 from mor.robot.evaluate import make_controller, play_sim_loop
-from mor.robot.policy import HierarchyPolicy, LNetRunner, evaluation_success, robot_method, uses_lnet
+from mor.policy.variants import GROUND_TRUTH, OURS
+from mor.robot.policy import (ROBOT_METHODS, HierarchyPolicy, LoadedMethod, evaluation_success,
+                              load_method, robot_method, uses_lnet)
 from mor.robot.pose import RobotTask
 from mor.robot.recording import RunInfo, RunRecorder
 from mor.robot.replay import ReplaySummary, replay_bag
 from mor.robot.results import LOOPS, loop_row, merge_row, same_episodes
 from mor.robot.video import write_run_video
 from pipelines import paths
-from pipelines.committed_lnet import lnet_runner
 from pipelines.io import write_json
+from pipelines.workspaces import workspace_record
 
 VIDEO = "sim_as_robot.gif"
 
 
-def load_controller(profile: Profile, method: str, source: str) -> tuple[Controller, LNetRunner | None]:
+def load_controller(profile: Profile, method: str, source: str) -> tuple[Controller, LoadedMethod]:
     """The controller of ``method`` (its committed policies, checked against the L-Net they observe through) with
-    pose source ``source`` (aruco or lnet), and the L-Net runner (None for gt_pose methods)."""
+    pose source ``source`` (aruco or lnet), and the loaded method (its L-Net, None for a method on the truth)."""
     robot_method(method)
     if source == "lnet" and not uses_lnet(method):
+        choices = ", ".join(name for name in ROBOT_METHODS if METHODS[name].uses_lnet)
         raise ConfigError(f"--method: {method!r} was trained on the truth, not on the L-Net's belief; the "
-                          "first-person loop plays an L-Net method (lnet, lnet_no_uncertainty, lnet_nearest_rule)")
-    runner = lnet_runner(method_spec(method).variant, profile)
-    policy = HierarchyPolicy.load(method, paths.POLICY_CARD, profile.sim, None if runner is None else runner.identity,
-                                  profile.policy.skills_deterministic)
-    return make_controller(profile.robot, source, policy, runner), runner
+                          f"first-person loop plays an L-Net method ({choices})")
+    loaded = load_method(method_spec(method), workspace_record(Path("."), profile), profile)
+    policy = HierarchyPolicy.of(loaded, profile.sim)
+    return make_controller(profile.robot, source, policy, loaded.lnet), loaded
 
 
 def sim(profile: Profile, loop: str, method: str, seeds: list[int] | None = None, episodes: int | None = None,
@@ -50,7 +52,7 @@ def sim(profile: Profile, loop: str, method: str, seeds: list[int] | None = None
     runs under ``datasets/robot/<loop>/``, the row in ``cards/robot/results.json`` and the card."""
     if loop not in LOOPS:
         raise ConfigError(f"--loop: unknown loop {loop!r}; choose one of {', '.join(LOOPS)}")
-    controller, _ = load_controller(profile, method, LOOPS[loop])
+    controller, loaded = load_controller(profile, method, LOOPS[loop])
     seeds = seeds or profile.evaluate.seeds
     keys = [(seed, episode) for seed in seeds for episode in range(episodes or profile.evaluate.episodes)]
     records_path = paths.ROBOT / loop / f"{method}.jsonl"
@@ -59,8 +61,7 @@ def sim(profile: Profile, loop: str, method: str, seeds: list[int] | None = None
                                 paths.ROBOT / loop / method, profile.collect.fps, profile.evaluate.horizon, progress)
     row = loop_row(records, profile.evaluate.bootstrap_resamples)
     if not uses_lnet(method):  # the evaluation's play of the same episodes: cheap without the L-Net
-        success = evaluation_success(method, paths.POLICY_CARD, profile.sim, keys, profile.policy.skills_deterministic,
-                                     profile.evaluate.n_envs, profile.evaluate.horizon)
+        success = evaluation_success(loaded, profile.sim, keys, profile.evaluate.n_envs, profile.evaluate.horizon)
         row["evaluation_same_episodes"] = same_episodes(success, records, profile.evaluate.bootstrap_resamples)
     merge_row(paths.ROBOT_CARD / "results.json", row)
     card()
@@ -113,10 +114,10 @@ def live(profile: Profile, method: str, source: str, task: RobotTask, max_steps:
 
 
 def bench(profile: Profile, frames: int, repeats: int, out: Path) -> dict[str, Any]:
-    """``mor bench robot``: each loop's controller step on one core (gt_pose through the tags, lnet through the
-    first-person frames), over the frames of one sim-as-robot episode."""
-    controllers = {"aruco_topdown": load_controller(profile, "gt_pose", "aruco")[0],
-                   "fpv_lnet": load_controller(profile, "lnet", "lnet")[0]}
+    """``mor bench robot``: each loop's controller step on one core (the ground truth's method through the tags,
+    ours through the first-person frames), over the frames of one sim-as-robot episode."""
+    controllers = {"aruco_topdown": load_controller(profile, GROUND_TRUTH.name, "aruco")[0],
+                   "fpv_lnet": load_controller(profile, OURS.name, "lnet")[0]}
     result = benchmark_robot(controllers, profile.sim, profile.robot, frames, repeats)
     result["lnet"] = {"compiled": profile.lnet.compile_step, "encoder_precision": profile.lnet.encoder_precision}
     write_json(out, result)

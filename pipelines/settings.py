@@ -44,3 +44,4 @@ def setting_profile(name: str, profile_name: str, params: Path = DEFAULT_PARAMS)
     document = setting_document(params, name)
     return validated(Profile, f"{params}: settings.{name} (profiles.{profile_name})",
                      **(document["profiles"][profile_name] or {}))
+

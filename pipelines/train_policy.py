@@ -7,24 +7,26 @@ committed so that a fresh clone can evaluate without retraining.
 
 from __future__ import annotations
 
-import json
+import os
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 from mor.atomic import atomic_folder
 from mor.config import Profile
-from mor.eval.results import repoint_policy_digests
 from mor.locking import writer_lock
-from mor.policy.envs import make_baseline_training_env, make_training_env
+from mor.policy.baselines import baseline_extractor
+from mor.policy.envs import make_training_env
 from mor.policy.hierarchy import POLICY_FILE, Skill
-from mor.policy.names import BASELINE_VARIANTS, TASKS, BaselineVariant, Task, Variant
+from mor.policy.names import TASKS, Task
 from mor.policy.plan import TaskPlan, training_plan
 from mor.policy.signature import PolicySignature, read_signature
 from mor.policy.train import train_policy
+from mor.data.parallel import unordered_map
+from mor.policy.variants import VARIANTS, Variant, policy_folder, seed_folder
+from mor.policy.workspace import committed_lnet
 from pipelines import paths
-from pipelines.io import write_json
-from pipelines.committed_lnet import lnet_runner
+from pipelines.workspaces import workspace_record
 
 PUBLISHED = (POLICY_FILE, "meta.json", "summary.json", "log.csv", "learning_curve.png")  # the last two if trained
 
@@ -39,86 +41,58 @@ def publish(run_dir: Path, card_dir: Path) -> None:
                 shutil.copyfile(run_dir / name, folder / name)
 
 
-def run_baseline(profile: Profile, variant: BaselineVariant, plans: list[TaskPlan], progress: bool = True
-                 ) -> list[dict]:
-    """Train the baseline's own skills (``plans``: the others reuse baseline_img's Pick; a baseline has no decision
-    policy); resumable."""
-    from mor.policy.baselines import BaselineExtractor  # noqa: PLC0415 - torch only here
-
-    settings, sim, summaries = profile.policy.baseline, profile.sim, []
-    extractor = {"features_extractor_class": BaselineExtractor,
-                 "features_extractor_kwargs": {"encoder": settings.encoder, "image_features": settings.image_features}}
-    for plan in plans:
-        task, params = plan.task, plan.params
-        signature = PolicySignature.of_baseline(task, variant, sim.n_objects, sim.arena, sim.image_size)
-        run_dir = paths.POLICIES / variant / task
-        summary = train_policy(lambda: make_baseline_training_env(task, variant, sim, params),  # noqa: B023
-                               params, signature, run_dir, profile.policy.seed, f"{variant} {task}", progress,
-                               policy_kwargs=extractor)
-        publish(run_dir, paths.POLICY_CARD / variant / task)
-        summaries.append({**summary, "encoder": settings.encoder})
-    return summaries
-
-
-def plan(profile: Profile, variant: Variant | BaselineVariant, tasks: tuple[Task, ...] = TASKS) -> list[TaskPlan]:
+def plan(profile: Profile, variant: Variant, tasks: tuple[Task, ...] = TASKS, seed: int = 0) -> list[TaskPlan]:
     """What ``run`` trains (``mor.policy.plan.training_plan`` with this workspace's and the main one's policies)."""
-    return training_plan(profile, variant, tasks, paths.POLICY_CARD, paths.MAIN / paths.POLICY_CARD)
+    return training_plan(profile, variant, tasks, paths.POLICY_CARD, paths.MAIN / paths.POLICY_CARD, seed)
 
 
-def run(profile: Profile, variant: Variant | BaselineVariant, tasks: tuple[Task, ...] = TASKS, progress: bool = True
+def run(profile: Profile, variant: Variant, tasks: tuple[Task, ...] = TASKS, seed: int = 0, progress: bool = True
         ) -> list[dict]:
-    """Train ``tasks`` of ``variant`` in order (the decision needs the pick and drop skills); resumable. One
-    training of a variant at a time (``writer_lock`` on its run folder)."""
-    with writer_lock(paths.POLICIES / variant, f"mor policy train --variant {variant}"):
-        return _train(profile, variant, tasks, progress)
+    """Train ``tasks`` of ``variant`` with training seed ``seed``, in order (the decision needs the pick and drop
+    skills); resumable. One training of a variant's seed at a time (``writer_lock`` on its run folder)."""
+    with writer_lock(seed_folder(paths.POLICIES, variant.name, seed), f"mor policy train --variant {variant.name} --seed {seed}"):
+        return _train(profile, variant, tasks, seed, progress)
 
 
-def _train(profile: Profile, variant: Variant | BaselineVariant, tasks: tuple[Task, ...], progress: bool
-           ) -> list[dict]:
-    """``run``'s work, under the variant's lock."""
-    plans = plan(profile, variant, tasks)
-    if variant in BASELINE_VARIANTS:
-        return run_baseline(profile, variant, plans, progress)
-    runner = lnet_runner(variant, profile)
+def run_seeds(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seeds: list[int], jobs: int = 1,
+              backend: str = "process") -> Iterator[list[dict]]:
+    """``run`` for each training seed of ``seeds``: in this process (``jobs`` 1), or as parallel jobs in worker
+    processes or Ray tasks (``mor.data.parallel.unordered_map``); yields each seed's summaries as it finishes."""
+    if jobs <= 1 and backend == "process":
+        yield from (run(profile, variant, tasks, seed) for seed in seeds)
+        return
+    yield from unordered_map(_seed_job, [(Path.cwd(), profile, variant.name, tasks, seed) for seed in seeds], jobs,
+                             backend)
+
+
+def _seed_job(job: tuple[Path, Profile, str, tuple[Task, ...], int]) -> list[dict]:
+    """One parallel training job (a worker process or a Ray task): one seed of a variant, without progress bars."""
+    workspace, profile, name, tasks, seed = job
+    os.chdir(workspace)  # the workspace's relative paths (a Ray worker starts elsewhere)
+    return run(profile, VARIANTS[name], tasks, seed, progress=False)
+
+
+def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: int, progress: bool) -> list[dict]:
+    """``run``'s work, under the lock of the seed's run: each task of the plan trained, then published to its card."""
+    policy, sim = profile.policy, profile.sim
+    runner = committed_lnet(workspace_record(Path("."), profile), variant, profile.lnet)
     version = runner.identity if runner is not None else None
     summaries = []
-    policy = profile.policy
-    for task_plan in plans:
+    for task_plan in plan(profile, variant, tasks, seed):
         task, params, source = task_plan.task, task_plan.params, task_plan.start
         init_from = None if source is None else (source / POLICY_FILE,
                                                  read_signature(source / "meta.json").observation)
         skills = None
         if task == "decision":
-            skills = tuple(Skill.load(paths.POLICY_CARD / variant / name / POLICY_FILE,
+            skills = tuple(Skill.load(policy_folder(paths.POLICY_CARD, variant.name, name, seed) / POLICY_FILE,
                                       policy.skills_deterministic) for name in ("pick", "drop"))
-        signature = PolicySignature.of(task, variant, profile.sim.n_objects, profile.sim.arena, version)
-        run_dir = paths.POLICIES / variant / task
+        signature = (PolicySignature.of_baseline(task, variant, sim.n_objects, sim.arena, sim.image_size)
+                     if variant.is_baseline else PolicySignature.of(task, variant, sim.n_objects, sim.arena, version))
+        run_dir = policy_folder(paths.POLICIES, variant.name, task, seed)
         summary = train_policy(
-            lambda: make_training_env(task, variant, profile.sim, params, runner, skills),  # noqa: B023
-            params, signature, run_dir, policy.seed, f"{variant} {task}", progress, init_from)
-        publish(run_dir, paths.POLICY_CARD / variant / task)
-        summaries.append(summary)
+            lambda: make_training_env(task, variant, sim, params, runner, skills),  # noqa: B023
+            params, signature, run_dir, seed, f"{variant.name} {task}" + (f" seed {seed}" if seed else ""),
+            progress, init_from, policy_kwargs=baseline_extractor(policy.baseline) if variant.is_baseline else None)
+        publish(run_dir, policy_folder(paths.POLICY_CARD, variant.name, task, seed))
+        summaries.append({**summary, "encoder": policy.baseline.encoder} if variant.is_baseline else summary)
     return summaries
-
-
-def convert_policies(files: list[Path]) -> list[tuple[Path, str, str]]:
-    """Rewrite each SB3-pickled policy file of ``files`` in MOR's safe format (weights bit-identical; this unpickles
-    them: the user trusts them), and re-point the results rows that recorded the old files' digests
-    (``cards/results/rows`` of this workspace and of every setting) at the new ones. Returns (file, old digest,
-    new digest) for each file converted; files already safe are skipped."""
-    from mor.lnet.runtime import file_digest  # noqa: PLC0415 - torch only where needed
-    from mor.policy.policy_file import convert_sb3_policy, is_sb3_pickle  # noqa: PLC0415
-
-    converted = []
-    for path in files:
-        if is_sb3_pickle(path):
-            old = file_digest(path)
-            convert_sb3_policy(path)
-            converted.append((path, old, file_digest(path)))
-    renamed = {old: new for _, old, new in converted}
-    for rows in (paths.RESULTS_CARD / "rows", *sorted(paths.SETTINGS.glob(f"*/{paths.RESULTS_CARD}/rows"))):
-        for path in sorted(rows.glob("*.json")):
-            row = json.loads(path.read_text())
-            if repoint_policy_digests(row, renamed):
-                write_json(path, row)
-    return converted

@@ -42,7 +42,7 @@ def test_the_rule_catches_a_pipelines_import() -> None:
 
 
 #: pipelines/ modules that are shared wiring or the command line, not stages (any stage may import them)
-PIPELINE_HELPERS = frozenset({"pipelines", "pipelines.paths", "pipelines.io", "pipelines.lnet_io", "pipelines.committed_lnet",
+PIPELINE_HELPERS = frozenset({"pipelines", "pipelines.paths", "pipelines.io", "pipelines.lnet_io", "pipelines.workspaces",
                               "pipelines.shapes",
                               "pipelines.settings", "pipelines.compute", "pipelines.cli", "pipelines.cli_policy",
                               "pipelines.cli_robot"})
@@ -53,3 +53,19 @@ STAGES = sorted(m for m in repo_modules() if m.split(".")[0] == "pipelines" and 
 def test_no_stage_module_imports_another(module: str) -> None:
     others = sorted(m for m in direct_imports(module) if m in STAGES and m != module)
     assert not others, f"{module} imports the stage modules {others}: move what they share to a helper module"
+
+
+def test_a_variants_name_is_written_in_at_most_three_files() -> None:
+    """Each variant is defined once (``mor.policy.variants``); besides it, only the methods (``mor.eval.methods``) and
+    the paper's tables (``mor.eval.tables``, which name their rows) may spell a variant's name; everything else asks
+    the variant. ("lnet" is left out: it also names the L-Net, its pose source and its stages.)"""
+    import re
+    from pathlib import Path
+
+    from mor.policy.variants import VARIANTS
+
+    root = Path(__file__).resolve().parents[1]
+    files = [*root.glob("mor/**/*.py"), *root.glob("pipelines/**/*.py")]
+    for name in (name for name in VARIANTS if name != "lnet"):
+        spelled = sorted(p.relative_to(root).as_posix() for p in files if re.search(rf"\b{name}\b", p.read_text()))
+        assert len(spelled) <= 3, f"{name} is written in {spelled}: ask mor.policy.variants instead"

@@ -102,10 +102,25 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     records = (workspace / "datasets/eval/lnet.jsonl").read_text().splitlines()
     protocol = tiny["evaluate"]
     assert len(records) == 3 * len(protocol["seeds"]) * protocol["episodes"]
+    # a second training run of each (lnet warm-starts from gt_pose's run of the same seed), and held-out episodes
+    _run("policy", "train", "--variant", "gt_pose", "--seed", "1", "--profile", "tiny")
+    _run("policy", "train", "--variant", "lnet", "--seed", "1", "--profile", "tiny")
+    assert json.loads((workspace / "cards/policy/lnet/seed_1/pick/summary.json").read_text())["seed"] == 1
+    _run("eval", "run", "--method", "lnet", "--training-seed", "1", "--profile", "tiny")
+    _run("eval", "run", "--method", "lnet", "--seeds", "7,8", "--profile", "tiny")
     _run("eval", "results", "--profile", "tiny")
     results = json.loads((workspace / "cards/results/results.json").read_text())
     assert {r["method"] for r in results["rows"]} == {"oracle", "gt_pose", "lnet", "lnet_no_uncertainty",
                                                        "lnet_nearest_rule"}
+    lnet = next(r for r in results["rows"] if r["method"] == "lnet" and r["episodes"] is None)
+    assert lnet["training_seeds"] == [0, 1] and len(lnet["runs"]) == 2 and not lnet["stale"]
+    assert sum(lnet["failures"]["pick"].values()) == 2 * len(protocol["seeds"]) * protocol["episodes"]
+    held_out = next(r for r in results["rows"] if r["method"] == "lnet" and r["episodes"] == "held_out")
+    assert held_out["seeds"] == [7, 8] and held_out["training_seeds"] == [0]
+    assert {(c["a"], c["b"]) for c in results["comparisons"]} == {("lnet", "lnet_no_uncertainty"),
+                                                                   ("lnet", "lnet_nearest_rule")}
+    card_text = (workspace / "cards/results/README.md").read_text()
+    assert "## Comparisons" in card_text and "## How episodes ended" in card_text and "## Held-out" in card_text
     assert "| Ours: policy + uncertainty (lnet) |" in (workspace / "cards/results/README.md").read_text()
     assert "Table 2" in _run("eval", "tables", "--table", "2")
     missing = CliRunner().invoke(app, ["eval", "tables", "--table", "1"])
@@ -133,9 +148,9 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     _run("eval", "results", "--profile", "tiny")
     rows = json.loads((workspace / "cards/results/results.json").read_text())["rows"]
     settings = {(r["arena"], r["policy_arena"], r["n_objects"]) for r in rows if r["method"] == "lnet"}
-    assert settings == {("rect", "rect", 3), ("polygon", "rect", 3), ("polygon", "polygon", 3), ("rect", "rect", 2)}
+    assert settings == {("square", "square", 3), ("polygon", "square", 3), ("polygon", "polygon", 3), ("square", "square", 2)}
     readme = (workspace / "cards/results/README.md").read_text()
-    assert "| Ours (lnet), policies trained in rect: zero-shot |" in readme and "| 2 objects: Ours (lnet) |" in readme
+    assert "| Ours (lnet), policies trained in the square arena: zero-shot |" in readme and "| 2 objects: Ours (lnet) |" in readme
     localisation = json.loads((workspace / "cards/results/results.json").read_text())["localisation"]
     assert localisation["settings/polygon"]["file"] == "settings/polygon/cards/lnet/metrics.json"  # its own L-Net
     assert localisation["settings/objects_2"]["file"] == "cards/lnet/metrics.json"  # lnet_from_main
@@ -148,7 +163,7 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     _run("eval", "results", "--profile", "tiny")
     rows = json.loads((workspace / "cards/results/results.json").read_text())["rows"]
     assert {(r["method"], r["arena"], r["n_objects"]) for r in rows if r["stale"]} == {
-        ("lnet", "rect", 3), ("lnet_no_uncertainty", "rect", 3), ("lnet_nearest_rule", "rect", 3), ("lnet", "rect", 2)}
+        ("lnet", "square", 3), ("lnet_no_uncertainty", "square", 3), ("lnet_nearest_rule", "square", 3), ("lnet", "square", 2)}
     assert "| Ours: policy + uncertainty (lnet) † |" in (workspace / "cards/results/README.md").read_text()
 
 

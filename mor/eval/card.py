@@ -7,15 +7,18 @@ from pathlib import Path
 from typing import Any
 
 from mor.errors import ConfigError
+from mor.eval.failures import ENDINGS
+from mor.eval.methods import METHODS
 from mor.eval.paper import METRIC_NAMES
-from mor.eval.tables import (LEGEND, TABLES, TableRow, budget_line, find_row, row_label, shortfalls, table_markdown,
-                             write_table_figure)
+from mor.eval.results import is_zero_shot
+from mor.eval.tables import (LEGEND, METRIC_LABELS, TABLES, TableRow, budget_line, find_row, row_label, shortfalls,
+                             table_markdown, write_table_figure)
 
 #: The README's generated block lies between these two lines (``write_readme_results`` replaces what is between).
 RESULTS_MARKERS = ("<!-- mor:results -->", "<!-- /mor:results -->")
-#: The headline table's methods, in order: the paper's Table 1 methods we have, and Table 2's no-uncertainty row.
-HEADLINE_METHODS = ("gt_pose", "lnet", "lnet_no_uncertainty", "baseline_img", "baseline_delta_pose",
-                    "baseline_landmark", "gt_pose_nearest_rule", "lnet_nearest_rule", "oracle")
+#: The headline table's candidates, in ``METHODS``' order: every one but the random policy (those with a line in
+#: Table 1 or 2 are shown).
+HEADLINE_METHODS = tuple(name for name in METHODS if name != "random")
 HEADLINE_METRIC = "rearrange_success"
 
 
@@ -35,11 +38,78 @@ def write_results_card(results: dict[str, Any], folder: Path) -> Path:
         figure = write_table_figure(spec, rows, folder / f"table{number}.png")
         if figure is not None:
             parts += ["", f"![Table {number}]({figure.name})"]
+    parts += comparison_section(results.get("comparisons") or [])
+    parts += failure_section(rows)
+    parts += held_out_section(rows)
     parts += shortfall_section(rows, results.get("localisation", {}))
     parts += compute_section(results.get("compute"))
     with atomic_output(folder / "README.md") as partial:
         partial.write_text("\n".join(parts) + "\n")
     return folder / "README.md"
+
+
+def comparison_section(comparisons: list[dict[str, Any]]) -> list[str]:
+    """The card's "Comparisons" section: each compared pair's difference per metric, its interval and verdict
+    (``results.json`` → ``comparisons``, ``mor.eval.results.comparisons``)."""
+    if not comparisons:
+        return []
+    lines = ["", "## Comparisons", "",
+             "Each difference is a − b over the same evaluation episodes, with a 95% interval from the two rows' "
+             "stratified bootstraps over training runs and episodes; the verdict follows from the interval (helps: "
+             "a is better, for %E a lower value; hurts: a is worse; no evidence: the interval holds 0). P(a > b): "
+             "the probability that an episode of a run of a beats one of a run of b.", "",
+             "| a | b | training runs (a / b) | metric | difference [95% interval] | P(a > b) | verdict |",
+             "|---|---|---|---|---|---|---|"]
+    for c in comparisons:
+        low, high = c["difference"]["ci95"]
+        runs = " / ".join(str(len(c["training_seeds"][name] or [0])) for name in (c["a"], c["b"]))
+        lines.append(f"| `{c['a']}` | `{c['b']}` | {runs} | {METRIC_LABELS[c['metric']]} | "
+                     f"{c['difference']['mean']:+.3f} [{low:+.3f}, {high:+.3f}] | "
+                     f"{c['probability_of_improvement']:.2f} | {c['verdict']} |")
+    return lines
+
+
+def failure_section(rows: list[dict[str, Any]]) -> list[str]:
+    """The card's "How episodes ended" section: per task, each main-setting row's episodes by ending
+    (``mor.eval.failures``; rows evaluated before rows counted them are left out)."""
+    counted = [row for row in rows if row.get("failures") and row.get("workspace", ".") == "."
+               and not is_zero_shot(row)]
+    if not counted:
+        return []
+    lines = ["", "## How episodes ended", "",
+             "Each episode's ending, named from the simulator's state when it ended (`mor.eval.failures`), summed "
+             "over the row's training runs."]
+    for task, endings in ENDINGS.items():
+        found = [row for row in counted if task in row["failures"]]
+        if not found:
+            continue
+        lines += ["", f"### {task.capitalize()}", "", "| ending | " + " | ".join(f"`{row['method']}`" for row in found)
+                  + " |", "|---|" + "---|" * len(found)]
+        lines += [f"| {ending} | " + " | ".join(str(row["failures"][task][ending]) for row in found) + " |"
+                  for ending in endings]
+    return lines
+
+
+def held_out_section(rows: list[dict[str, Any]]) -> list[str]:
+    """The card's "Held-out episodes" section: each row evaluated on episode seeds outside the protocol (``mor eval
+    run --seeds``) beside its protocol row, so that a reader sees nothing was tuned to the protocol's episodes."""
+    pairs = []
+    for held in (row for row in rows if row.get("episodes") == "held_out"):
+        protocol = find_row(rows, {key: held[key] for key in ("method", "encoder", "arena", "policy_arena",
+                                                              "n_objects")})
+        if protocol is not None:
+            pairs.append((protocol, held))
+    if not pairs:
+        return []
+    lines = ["", "## Held-out episodes", "", "Each metric on the protocol's evaluation seeds and on seeds it never "
+             "used, mean [95% interval].", "",
+             "| method | seeds (protocol / held out) | " + " | ".join(METRIC_LABELS[m] for m in METRIC_NAMES) + " |",
+             "|---|---|" + "---|" * len(METRIC_NAMES)]
+    for protocol, held in pairs:
+        cells = [" / ".join(f"{row['metrics'][m]['mean']:.3f} [{row['metrics'][m]['ci95'][0]:.3f}, "
+                            f"{row['metrics'][m]['ci95'][1]:.3f}]" for row in (protocol, held)) for m in METRIC_NAMES]
+        lines.append(f"| `{held['method']}` | {protocol['seeds']} / {held['seeds']} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def compute_section(compute: dict[str, Any] | None) -> list[str]:
@@ -75,7 +145,8 @@ def shortfall_section(rows: list[dict[str, Any]], localisation: dict[str, dict[s
 def headline_lines() -> list[TableRow]:
     """The headline table's lines: each of ``HEADLINE_METHODS`` as Table 1 (else Table 2) states it."""
     lines = [*TABLES[1].rows, *TABLES[2].rows]
-    return [next(line for line in lines if line.match["method"] == method) for method in HEADLINE_METHODS]
+    found = (next((line for line in lines if line.match["method"] == method), None) for method in HEADLINE_METHODS)
+    return [line for line in found if line is not None]
 
 
 def headline_markdown(results: dict[str, Any], card: str = "cards/results") -> str:

@@ -11,25 +11,28 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Any
 
+from mor.eval.failures import EndingDiary
 from mor.policy.envs import make_task_env
 from mor.policy.features import Encode
 from mor.policy.hierarchy import Decide, EpisodeKey, Skill, SkillHierarchy
+from mor.policy.names import PLAYED_BY, WorldTask
 from mor.policy.observations import BatchTracker
 from mor.sim.config import SimConfig
 
 
 def play_lockstep(
-    task: str, keys: list[tuple[EpisodeKey, int]], sim: SimConfig, tracker: BatchTracker, skills: dict[str, Skill],
+    task: WorldTask, keys: list[tuple[EpisodeKey, int]], sim: SimConfig, tracker: BatchTracker, skills: dict[str, Skill],
     decide: Decide | None, encode: Encode, n_envs: int, **env_kwargs: Any,
 ) -> Iterator[tuple[EpisodeKey, dict[str, Any]]]:
     """Play ``keys`` ((key, reset seed) pairs) of ``task`` (pick, drop or rearrange) with the skills, fed by
-    ``encode`` (and, for rearrange, ``decide``); yield (key, {metrics, steps, return}) as each episode ends.
+    ``encode`` (and, for rearrange, ``decide``); yield (key, {metrics, steps, return, ending}) as each episode ends
+    (``ending``: ``mor.eval.failures.EndingDiary``'s).
     ``tracker`` must keep ``min(n_envs, len(keys))`` environments; ``env_kwargs`` go to the environments (e.g.
     ``horizon``)."""
-    env_task = "decision" if task == "rearrange" else task
-    envs = [make_task_env(env_task, sim, tracker.needs_frames, **env_kwargs) for _ in range(min(n_envs, len(keys)))]
+    envs = [EndingDiary(make_task_env(task, sim, tracker.needs_frames, **env_kwargs))
+            for _ in range(min(n_envs, len(keys)))]
     try:
-        yield from SkillHierarchy(envs, tracker, skills, encode, env_task).play(keys, decide)
+        yield from SkillHierarchy(envs, tracker, skills, encode, PLAYED_BY[task]).play(keys, decide)
     finally:
         for env in envs:
             env.close()

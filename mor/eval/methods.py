@@ -1,106 +1,162 @@
-"""The methods the protocol can score, by name, and loading a method's trained policies.
+"""The methods the protocol can score, each defined once, and loading a method's committed policies.
 
-A learned method is an observation variant (``mor.policy.observations.VARIANTS``) with its pick, drop and
-decision policies; ``*_nearest_rule`` replaces the learned decision by the nearest-unfixed-object rule; the
-baselines (``mor.policy.baselines``) chain their pixel-fed pick and drop skills in object order;
-``oracle`` and ``random`` are the simulator's scripted policies.
+A method is a policy variant (``mor.policy.variants``) plus a decision rule, as Habitat-lab's high-level policies
+are: ``learned`` (the variant's decision policy), ``nearest_rule`` (the nearest unfixed object), ``object_order``
+(a baseline, which holds no pose estimate, takes the objects in index order) or ``scripted`` (the simulator's
+``oracle`` and ``random``, no variant).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from mor.errors import ConfigError
 from mor.policy.hierarchy import POLICY_FILE, Skill
-from mor.policy.names import BASELINE_VARIANTS, PICK_FROM, TASKS, VARIANTS, BaselineVariant, Task, Variant
+from mor.policy.names import TASKS, Task
 from mor.policy.signature import ZERO_SHOT_FIELDS, PolicySignature, check_signature
+from mor.policy.variants import VARIANTS, Variant, policy_folder
+from mor.policy.workspace import Workspace, committed_lnet
+from mor.sim.arena import Arena
+
+if TYPE_CHECKING:
+    from mor.config import Profile
+    from mor.lnet.runtime import LNetRunner
+    from mor.policy.observations import BatchTracker
 
 Decision = Literal["learned", "nearest_rule", "object_order", "scripted"]
 
+#: the variants also scored with the nearest-unfixed-object rule in place of their learned decision (Table 1's
+#: check that the decision policy earns its place)
+NEAREST_RULE_VARIANTS = ("gt_pose", "lnet")
+RULE_SUFFIX = "_nearest_rule"
+
 
 @dataclass(frozen=True)
-class MethodSpec:
+class Method:
     name: str
-    variant: Variant | BaselineVariant | None  # None for the scripted policies
+    variant: Variant | None  # None for the scripted policies
     decision: Decision
 
     @property
     def is_baseline(self) -> bool:
-        """An end-to-end pixel baseline (``mor.policy.baselines``): its skills chained in object order."""
-        return self.decision == "object_order"
+        return self.variant is not None and self.variant.is_baseline
 
     @property
     def uses_lnet(self) -> bool:
-        """Observes the world through the L-Net's estimates (every learned variant but gt_pose)."""
-        return self.variant in VARIANTS and self.variant != "gt_pose"
+        """Observes the world through the L-Net's estimates."""
+        return self.variant is not None and self.variant.uses_lnet
 
-    def skill_owners(self) -> dict[Task, Variant | BaselineVariant]:
+    def skill_owners(self) -> dict[Task, Variant]:
         """Whose trained policy each task this method plays is: the variant's own (the decision only where it is
-        learned), a baseline's Pick ``PICK_FROM``'s; empty for the scripted policies."""
+        learned), a baseline's Pick its ``pick_from``'s; empty for the scripted policies."""
         if self.variant is None:
             return {}
         if self.is_baseline:
-            return {"pick": PICK_FROM, "drop": self.variant}
+            return {"pick": VARIANTS[self.variant.pick_from or self.variant.name], "drop": self.variant}
         return {task: self.variant for task in TASKS if task != "decision" or self.decision == "learned"}
 
 
-METHODS: dict[str, MethodSpec] = {spec.name: spec for spec in (
-    MethodSpec("gt_pose", "gt_pose", "learned"),
-    MethodSpec("lnet", "lnet", "learned"),
-    MethodSpec("lnet_no_uncertainty", "lnet_no_uncertainty", "learned"),
-    MethodSpec("gt_pose_nearest_rule", "gt_pose", "nearest_rule"),
-    MethodSpec("lnet_nearest_rule", "lnet", "nearest_rule"),
-    *(MethodSpec(name, name, "object_order") for name in BASELINE_VARIANTS),
-    MethodSpec("oracle", None, "scripted"),
-    MethodSpec("random", None, "scripted"),
+METHODS: dict[str, Method] = {method.name: method for method in (
+    *(Method(v.name, v, "object_order" if v.is_baseline else "learned") for v in VARIANTS.values()),
+    *(Method(name + RULE_SUFFIX, VARIANTS[name], "nearest_rule") for name in NEAREST_RULE_VARIANTS),
+    Method("oracle", None, "scripted"),
+    Method("random", None, "scripted"),
 )}
 
 
-def method_spec(name: str) -> MethodSpec:
+def method_spec(name: str) -> Method:
     """The method called ``name``; a ConfigError listing the known ones otherwise."""
     if name not in METHODS:
         raise ConfigError(f"method: unknown method {name!r}; choose one of {', '.join(METHODS)}")
     return METHODS[name]
 
 
-def policy_dir(root: Path, variant: Variant, task: Task) -> Path:
-    """Where variant ``variant``'s ``task`` policy is trained (``root/variant/task``)."""
-    return root / variant / task
-
-
 @dataclass
 class TrainedPolicies:
-    """A variant's frozen policies: pick and drop skills and (for a learned decision) the decision policy."""
+    """A method's frozen policies: pick and drop skills and (for a learned decision) the decision policy."""
 
     pick: Skill
     drop: Skill
     decision: Skill | None
 
-    @classmethod
-    def load(cls, root: Path, variant: Variant, n_objects: int, arena: str, lnet_version: str | None,
-             with_decision: bool, deterministic: bool = True, zero_shot: bool = False) -> TrainedPolicies:
-        """Load ``root/variant/{pick,drop,decision}/policy.pth``, each checked against its ``meta.json``
-        (zero_shot: trained in another arena and through another L-Net, ``ZERO_SHOT_FIELDS``)."""
-        skills: dict[str, Skill | None] = {"decision": None}
-        allow = ZERO_SHOT_FIELDS if zero_shot else ()
-        for task in TASKS if with_decision else ("pick", "drop"):
-            folder = policy_dir(root, variant, task)
-            check_signature(folder / "meta.json", PolicySignature.of(task, variant, n_objects, arena, lnet_version),
-                            allow)
-            skills[task] = Skill.load(folder / POLICY_FILE, deterministic)
-        return cls(skills["pick"], skills["drop"], skills["decision"])
 
-    @classmethod
-    def load_baseline(cls, root: Path, variant: BaselineVariant, n_objects: int, arena: str, image_size: int,
-                      deterministic: bool = True) -> TrainedPolicies:
-        """A baseline's skills (``MethodSpec.skill_owners``: ``PICK_FROM``'s pick and its own drop), each checked
-        against its ``meta.json``."""
-        skills = {}
-        for task, owner in METHODS[variant].skill_owners().items():
-            folder = policy_dir(root, owner, task)
-            check_signature(folder / "meta.json",
-                            PolicySignature.of_baseline(task, owner, n_objects, arena, image_size))
-            skills[task] = Skill.load(folder / POLICY_FILE, deterministic)
-        return cls(skills["pick"], skills["drop"], None)
+@dataclass
+class LoadedMethod:
+    """A method ready to play: its policies (None for the scripted ones), a factory of trackers for n envs at once,
+    the L-Net it observes through and that L-Net's identity (None without one), and the committed folder of each
+    policy."""
+
+    method: Method
+    policies: TrainedPolicies | None = None
+    tracker_factory: Callable[[int], BatchTracker] | None = None
+    lnet: LNetRunner | None = None
+    folders: dict[Task, Path] = field(default_factory=dict)
+
+    @property
+    def lnet_version(self) -> str | None:
+        return None if self.lnet is None else self.lnet.identity
+
+    def played_by(self) -> dict[str, Any]:
+        """What plays its episodes, sealed into each record: the policy files' digests and the L-Net's identity."""
+        if not self.folders:
+            return {}
+        return {"policies": policy_digests(self.folders), "lnet_version": self.lnet_version}
+
+
+def policy_root(workspace: Workspace, zero_shot: bool) -> Path:
+    """Where the policies a method plays are committed: the workspace's, or (zero-shot, only in a setting) the
+    main workspace's."""
+    if not zero_shot:
+        return workspace.policy_card
+    if not workspace.is_setting:
+        raise ConfigError("--zero-shot: plays the main workspace's policies in a setting; run it as "
+                          "mor --setting NAME eval run --method M --zero-shot")
+    return workspace.main_policy_card
+
+
+def policy_folders(method: Method, root: Path, training_seed: int = 0) -> dict[Task, Path]:
+    """The committed folder of each policy a learned method plays (``Method.skill_owners``) in its run with
+    ``training_seed``."""
+    return {task: policy_folder(root, owner.name, task, training_seed)
+            for task, owner in method.skill_owners().items()}
+
+
+def policy_digests(folders: dict[Task, Path]) -> dict[str, str]:
+    """task -> the digest (``mor.lnet.runtime.file_digest``) of the policy file in its folder."""
+    from mor.lnet.runtime import file_digest  # noqa: PLC0415 - torch only where needed
+
+    return {task: file_digest(folder / POLICY_FILE) for task, folder in folders.items()}
+
+
+def load_method(method: Method, workspace: Workspace, profile: Profile, zero_shot: bool = False,
+                training_seed: int = 0) -> LoadedMethod:
+    """``method``'s committed policies of its run with ``training_seed`` (each checked against its ``meta.json``:
+    what it was trained on), its tracker factory and its L-Net; zero_shot: the main workspace's policies through
+    this workspace's L-Net."""
+    if method.variant is None:
+        return LoadedMethod(method)
+    from mor.policy.observations import GroundTruthBatchTracker, RenderingTruthTracker  # noqa: PLC0415
+
+    sim, deterministic = profile.sim, profile.policy.skills_deterministic
+    folders = policy_folders(method, policy_root(workspace, zero_shot), training_seed)
+    runner = committed_lnet(workspace, method.variant, profile.lnet)
+    version = runner.identity if runner is not None else None
+    allow = ZERO_SHOT_FIELDS if zero_shot else ()
+    skills: dict[str, Skill | None] = {"decision": None}
+    for task, folder in folders.items():
+        owner = method.skill_owners()[task]
+        expected = (PolicySignature.of_baseline(task, owner, sim.n_objects, sim.arena, sim.image_size)
+                    if owner.is_baseline else PolicySignature.of(task, owner, sim.n_objects, sim.arena, version))
+        check_signature(folder / "meta.json", expected, allow)
+        skills[task] = Skill.load(folder / POLICY_FILE, deterministic)
+    policies = TrainedPolicies(skills["pick"], skills["drop"], skills["decision"])
+    if runner is not None:
+        from mor.policy.lnet_tracking import LNetBatchTracker  # noqa: PLC0415
+
+        arena = Arena.build(sim.arena, sim.arena_size) if method.variant.search else None
+        return LoadedMethod(method, policies, lambda n: LNetBatchTracker(runner, n, arena), runner, folders)
+    tracker = RenderingTruthTracker if method.is_baseline else GroundTruthBatchTracker
+    return LoadedMethod(method, policies, lambda n: tracker(), None, folders)

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from mor.policy.variants import VARIANTS
 from mor.eval.paper import LOWER_IS_BETTER, METRIC_NAMES
 from mor.eval.tables import METRIC_LABELS, paper_reference
 
@@ -18,17 +19,24 @@ def _metric_cell(summary: dict[str, Any]) -> str:
     return f"{summary['mean']:.3f} ± {summary['std']:.3f} [{low:.3f}, {high:.3f}]"
 
 
-def uncertainty_comparison(rows: list[dict[str, Any]]) -> list[str]:
-    """Table lines comparing the ``lnet`` and ``lnet_no_uncertainty`` rows metric by metric: which is better where
-    their 95% intervals do not overlap, "no difference shown" where they do; [] when either row is missing."""
-    found = {row["method"]: row for row in rows if row["method"] in ("lnet", "lnet_no_uncertainty")}
+def ablation_pair(variant: str) -> tuple[str, str] | None:
+    """(the variant with its uncertainty, the one without: ``Variant.ablation_of``) where ``variant`` is either;
+    None for the others."""
+    return next(((v.ablation_of, v.name) for v in VARIANTS.values() if v.ablation_of
+                 and variant in (v.name, v.ablation_of)), None)
+
+
+def uncertainty_comparison(rows: list[dict[str, Any]], pair: tuple[str, str]) -> list[str]:
+    """Table lines comparing the rows of ``pair`` (with, without the uncertainty) metric by metric: which is better
+    where their 95% intervals do not overlap, "no difference shown" where they do; [] when either row is missing."""
+    found = {row["method"]: row for row in rows if row["method"] in pair}
     if len(found) < 2:
         return []
     lines = []
     for metric in METRIC_NAMES:
-        with_, without = found["lnet"]["metrics"][metric], found["lnet_no_uncertainty"]["metrics"][metric]
+        with_, without = (found[name]["metrics"][metric] for name in pair)
         if with_["ci95"][0] > without["ci95"][1] or with_["ci95"][1] < without["ci95"][0]:
-            higher = "lnet" if with_["mean"] > without["mean"] else "lnet_no_uncertainty"
+            higher = pair[0] if with_["mean"] > without["mean"] else pair[1]
             verdict = f"{higher} higher" + (" (worse)" if metric in LOWER_IS_BETTER else "")
         else:
             verdict = "no difference shown"
@@ -43,14 +51,14 @@ def policy_card_markdown(variant: str, summaries: dict[str, dict[str, Any]], row
     lines = [f"# Policy card: `{variant}`", "",
              f"Profile `{profile}`. The pick and drop sub-policies (sb3-contrib MaskablePPO) and the decision policy "
              "that chains them (paper section 4.2); observation layout and choices in `docs/assumptions.md` "
-             "(\"Policies\"). Load them with `mor.eval.methods.TrainedPolicies.load`; evaluate with "
+             "(\"Policies\"). Load them with `mor.eval.methods.load_method`; evaluate with "
              f"`mor eval run --method {variant}`; watch one with `mor sim video --policy {variant}`.", "",
              "## Training", "",
              "| policy | steps | wall time (last run) | steps/s | warm start | " + " | ".join(_PPO_KEYS[1:]) + " |",
              "|" + "---|" * (5 + len(_PPO_KEYS) - 1)]
     for task, summary in summaries.items():
         params = summary["params"]
-        warm = "from gt_pose" if summary.get("warm_start") else "–"
+        warm = f"from {VARIANTS[variant].warm_start}" if summary.get("warm_start") else "–"
         rate = summary.get("steps_per_second_this_run") or "–"
         lines.append(f"| {task} | {summary['steps']:,} | {summary['wall_seconds_this_run']:.0f} s | {rate} | {warm} | "
                      + " | ".join(str(params[k]) for k in _PPO_KEYS[1:]) + " |")
@@ -70,14 +78,15 @@ def policy_card_markdown(variant: str, summaries: dict[str, dict[str, Any]], row
             paper_text = f"{theirs[0]:.3f} ± {theirs[1]:.3f}" if theirs else "–"
             lines.append(f"| {METRIC_LABELS[metric]} | {_metric_cell(row['metrics'][metric])} | {paper_text} |")
         lines.append("")
-    comparison = uncertainty_comparison(all_rows) if variant in ("lnet", "lnet_no_uncertainty") else []
+    pair = ablation_pair(variant)
+    comparison = uncertainty_comparison(all_rows, pair) if pair else []
     if comparison:
-        lines += ["## Does the uncertainty help? (`lnet` against `lnet_no_uncertainty`, same episodes)", "",
-                  "| metric | lnet | lnet_no_uncertainty | verdict (95% intervals) |", "|---|---|---|---|", *comparison,
+        lines += [f"## Does the uncertainty help? (`{pair[0]}` against `{pair[1]}`, same episodes)", "",
+                  f"| metric | {pair[0]} | {pair[1]} | verdict (95% intervals) |", "|---|---|---|---|", *comparison,
                   ""]
     if video:
         lines += ["## An episode", "", f"[{video}]({video}): first-person view (left) and top-down view (right): "
-                  "the truth as stars, the policy's belief as 2σ ellipses (zero for gt_pose)."]
+                  "the truth as stars, the policy's belief as 2σ ellipses (zero for a policy on the true poses)."]
     return "\n".join(lines) + "\n"
 
 

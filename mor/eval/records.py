@@ -10,17 +10,18 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
-from typing import Any, Literal, get_args
+from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from mor.atomic import atomic_output
 from mor.errors import ConfigError
+from mor.policy.names import WORLD_TASKS, WorldTask
 from mor.sim.config import format_validation_error
 from mor.sim.rollout import episode_seed
 
-EvalTask = Literal["pick", "drop", "rearrange"]
-EVAL_TASKS: tuple[str, ...] = get_args(EvalTask)
+EvalTask = WorldTask  # every world task is scored: Pick and Drop on their own, Rearrange with the whole hierarchy
+EVAL_TASKS: tuple[str, ...] = WORLD_TASKS
 #: the five metrics of paper Table 1: name -> (the task whose records hold it, its key in their ``metrics``)
 METRICS = {"pick_success": ("pick", "success"), "drop_success": ("drop", "success"),
            "rearrange_success": ("rearrange", "success"), "fixed_strict": ("rearrange", "fixed_strict"),
@@ -40,6 +41,7 @@ class EpisodeRecord(BaseModel):
     metrics: dict[str, float]
     steps: int = Field(ge=0)
     return_: float = Field(alias="return")
+    ending: str | None = None  # mor.eval.failures.ENDINGS; None for the scripted policies and older records
     digest: str
 
     @model_validator(mode="after")

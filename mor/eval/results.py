@@ -2,14 +2,25 @@
 
 from __future__ import annotations
 
+import json
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
-ROW_KEYS = ("method", "encoder", "arena", "policy_arena", "n_objects")
+import numpy as np
 
+from mor.errors import ConfigError
+from mor.eval.methods import (NEAREST_RULE_VARIANTS, RULE_SUFFIX, method_spec, policy_digests, policy_folders,
+                              policy_root)
+from mor.eval.failures import sum_endings
+from mor.eval.paper import LOWER_IS_BETTER
+from mor.eval.stats import probability_of_improvement, summarize_runs
+from mor.policy.variants import VARIANTS
+from mor.policy.workspace import Workspace
 
-def arena_label(arena: str) -> str:
-    """The results' name of a simulator arena: the square arena is the paper's rectangular one ("rect")."""
-    return "rect" if arena == "square" else arena
+#: a row's identity; ``episodes`` is None for the protocol's evaluation seeds, "held_out" for others
+#: (``mor eval run --seeds``)
+ROW_KEYS = ("method", "encoder", "arena", "policy_arena", "n_objects", "episodes")
 
 
 def is_zero_shot(row: dict[str, Any]) -> bool:
@@ -35,3 +46,122 @@ def repoint_policy_digests(row: dict[str, Any], renamed: dict[str, str]) -> bool
     changed = {task: renamed[digest] for task, digest in policies.items() if digest in renamed}
     policies.update(changed)
     return bool(changed)
+
+
+def gather_rows(rows_folders: dict[str, Path], profile_name: str, existing: dict[str, Any] | None = None,
+                resamples: int = 10_000) -> list[dict[str, Any]]:
+    """The rows of profile ``profile_name``: those of ``existing`` (an earlier results.json, kept where no row
+    replaces it; ignored when it is another profile's), replaced by the ``*.json`` rows in ``rows_folders``
+    (workspace name -> its ``cards/results/rows`` folder; each training run's, ``aggregate_runs``), each marked
+    with the ``workspace`` it was evaluated in."""
+    found = [{**json.loads(path.read_text()), "workspace": workspace}
+             for workspace, folder in rows_folders.items() for path in sorted(folder.glob("*.json"))]
+    kept = existing["rows"] if existing and existing.get("profile") == profile_name else []
+    return merge_rows(kept, aggregate_runs([row for row in found if row.get("profile") == profile_name], resamples))
+
+
+def stale_row(row: dict[str, Any], workspace: Workspace, lnet_identity: Callable[[Path], str]) -> bool:
+    """Whether ``row`` (evaluated in ``workspace``) was played by other policies or through another L-Net than the
+    ones committed now: an L-Net row whose ``lnet_version`` is not ``lnet_identity(workspace.lnet_card)`` (a row from
+    before rows recorded it counts as stale), or a row whose recorded policy digests differ from its policy files'."""
+    if row.get("runs"):
+        return any(stale_row({**row, **run, "runs": None}, workspace, lnet_identity) for run in row["runs"])
+    method = method_spec(row["method"])
+    played_by = row.get("played_by") or {}
+    if method.uses_lnet and played_by.get("lnet_version") != lnet_identity(workspace.lnet_card):
+        return True
+    if not played_by.get("policies"):
+        return False
+    root = policy_root(workspace, is_zero_shot(row))
+    return played_by["policies"] != policy_digests(policy_folders(method, root, row.get("training_seed", 0)))
+
+
+def aggregate_runs(rows: list[dict[str, Any]], resamples: int = 10_000) -> list[dict[str, Any]]:
+    """One row per ``ROW_KEYS`` key: a key with one training run keeps its row (``training_seeds`` [its seed]); a key
+    with several (rows of ``mor eval run --training-seed``) becomes one row whose metrics are
+    ``mor.eval.stats.summarize_runs`` over the runs' per-episode ``outcomes`` and whose ``runs`` keep each run's
+    seed, metrics and what played it. ConfigError when the runs were played on other episodes, or through other
+    L-Nets (naming both sides)."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault(row_key(row), []).append(row)
+    aggregated = []
+    for group in groups.values():
+        group = sorted(group, key=lambda row: row.get("training_seed") or 0)
+        if len(group) == 1:
+            aggregated.append({**group[0], "training_seeds": [group[0].get("training_seed") or 0]})
+            continue
+        aggregated.append(_aggregate(group, resamples))
+    return aggregated
+
+
+def _aggregate(group: list[dict[str, Any]], resamples: int) -> dict[str, Any]:
+    first = group[0]
+    name = first["method"]
+    for row in group[1:]:
+        for field in ("seeds", "episodes_per_seed"):
+            if row[field] != first[field]:
+                raise ConfigError(f"{name}: its training runs were evaluated on other episodes ({field} "
+                                  f"{first[field]} against {row[field]}); re-run mor eval run for every seed")
+        versions = ((first.get("played_by") or {}).get("lnet_version"), (row.get("played_by") or {}).get(
+            "lnet_version"))
+        if versions[0] != versions[1]:
+            raise ConfigError(f"{name}: training seed {first['training_seed']} played through L-Net {versions[0]} "
+                              f"but seed {row['training_seed']} through {versions[1]}; one row aggregates one "
+                              "L-Net's runs: retrain and re-evaluate the stale seed")
+    missing = [row["training_seed"] for row in group if not row.get("outcomes")]
+    if missing:
+        raise ConfigError(f"{name}: the rows of training seeds {missing} hold no per-episode outcomes (evaluated "
+                          "before rows kept them); re-run mor eval run --training-seed S for them")
+    metrics = {metric: summarize_runs([row["outcomes"][metric] for row in group], resamples)[0]
+               for metric in first["metrics"]}
+    runs = [{"training_seed": row["training_seed"], "metrics": row["metrics"], "played_by": row.get("played_by"),
+             "wall_seconds": row.get("wall_seconds")} for row in group]
+    kept = {key: value for key, value in first.items() if key not in ("outcomes", "played_by", "training_seed")}
+    return {**kept, "metrics": metrics, "failures": sum_endings([row.get("failures") or {} for row in group]),
+            "training_seeds": [row["training_seed"] for row in group], "runs": runs,
+            "outcomes_by_run": [row["outcomes"] for row in group]}
+
+
+def run_outcomes(row: dict[str, Any]) -> list[dict[str, dict[str, list[float]]]]:
+    """Each training run's per-episode outcomes of a row ({metric: {evaluation seed: values}} per run)."""
+    return row.get("outcomes_by_run") or ([row["outcomes"]] if row.get("outcomes") else [])
+
+
+#: the pairs a results file compares (a, b): each variant with its uncertainty against its ablation (paper Table 2),
+#: each variant that reads the stated belief against the one that reads its Gaussian only, and each learned
+#: decision against the nearest-unfixed-object rule
+COMPARED: tuple[tuple[str, str], ...] = (
+    *((variant.ablation_of, name) for name, variant in VARIANTS.items() if variant.ablation_of),
+    *((name, other) for name, variant in VARIANTS.items() if variant.search for other, plain in VARIANTS.items()
+      if (plain.source, plain.uncertainty, plain.search) == (variant.source, variant.uncertainty, False)),
+    *((name, name + RULE_SUFFIX) for name in NEAREST_RULE_VARIANTS),
+)
+
+
+def comparisons(rows: list[dict[str, Any]], resamples: int = 10_000) -> list[dict[str, Any]]:
+    """For each pair of ``COMPARED`` with both rows in the main setting and per-episode outcomes, each metric's
+    difference a - b: its mean and a 95% interval (the two rows' ``summarize_runs`` distributions, drawn
+    independently), the probability of improvement, and the verdict the interval gives: ``helps`` (a better: the
+    interval above 0, below 0 for a metric where lower is better), ``hurts`` (the other way) or ``no evidence``."""
+    main = {row["method"]: row for row in rows if row.get("workspace", ".") == "." and not is_zero_shot(row)}
+    found = []
+    for a, b in COMPARED:
+        if a not in main or b not in main or not run_outcomes(main[a]) or not run_outcomes(main[b]):
+            continue
+        for metric in main[a]["metrics"]:
+            runs_a = [run[metric] for run in run_outcomes(main[a])]
+            runs_b = [run[metric] for run in run_outcomes(main[b])]
+            summary_a, dist_a = summarize_runs(runs_a, resamples, seed=1)
+            summary_b, dist_b = summarize_runs(runs_b, resamples, seed=2)
+            low, high = (float(x) for x in np.percentile(dist_a - dist_b, [2.5, 97.5]))
+            sign = -1.0 if metric in LOWER_IS_BETTER else 1.0
+            better, worse = (low > 0, high < 0) if sign > 0 else (high < 0, low > 0)
+            found.append({
+                "a": a, "b": b, "metric": metric, "training_seeds": {a: main[a].get("training_seeds"),
+                                                                     b: main[b].get("training_seeds")},
+                "difference": {"mean": summary_a["mean"] - summary_b["mean"], "ci95": [low, high]},
+                "probability_of_improvement": probability_of_improvement(
+                    *(([np.concatenate(list(run.values())) * sign for run in runs]) for runs in (runs_a, runs_b))),
+                "verdict": "helps" if better else "hurts" if worse else "no evidence"})
+    return found

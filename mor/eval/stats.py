@@ -1,4 +1,5 @@
-"""Statistics of an evaluation: per-seed means, their mean ± std, and a 95% bootstrap interval.
+"""Statistics of an evaluation: per-seed means, their mean ± std, and a 95% bootstrap interval; over training runs,
+their mean ± std, a stratified bootstrap interval over runs and episodes, and the probability of improvement.
 
 The interval resamples episodes (all seeds' episodes pooled; each episode is an independent layout drawn from
 its own seed), with ``scipy.stats.bootstrap``'s BCa method; docs/assumptions.md, "Evaluation", says why
@@ -28,3 +29,49 @@ def summarize(values_by_seed: Mapping[int, Sequence[float]], resamples: int = 10
     means = np.array(list(seed_means.values()))
     return {"mean": float(means.mean()), "std": float(means.std()), "ci95": [low, high],
             "seed_means": {str(k): v for k, v in seed_means.items()}}
+
+
+def _run_bootstrap(values_by_seed: Mapping[str, Sequence[float]], resamples: int, rng: np.random.Generator
+                   ) -> np.ndarray:
+    """(resamples,) means of one run's episodes, each resampled with replacement within its evaluation seed."""
+    total = np.zeros(resamples)
+    count = 0
+    for values in values_by_seed.values():
+        array = np.asarray(values, float)
+        total += array[rng.integers(0, len(array), (resamples, len(array)))].sum(axis=1)
+        count += len(array)
+    return total / count
+
+
+def summarize_runs(runs: Sequence[Mapping[str, Sequence[float]]], resamples: int = 10_000, seed: int = 0
+                   ) -> tuple[dict, np.ndarray]:
+    """Training runs' per-episode values ({evaluation seed: values} each) -> ({"mean", "std" (over the runs' means,
+    ddof=1; 0 for one run), "ci95" (a stratified bootstrap: runs resampled with replacement, and within each
+    drawn run its episodes within each evaluation seed), "iqm" (the interquartile mean of the runs' means, Agarwal et
+    al. 2021), "run_means"}, the bootstrap distribution (resamples,) for comparisons)."""
+    if not runs:
+        raise ValueError("summarize_runs: no runs")
+    rng = np.random.default_rng(seed)
+    run_means = np.array([np.mean(np.concatenate([np.asarray(v, float) for v in run.values()])) for run in runs])
+    per_run = np.stack([_run_bootstrap(run, resamples, rng) for run in runs])  # (R, resamples)
+    drawn = rng.integers(0, len(runs), (resamples, len(runs)))
+    distribution = per_run[drawn, np.arange(resamples)[:, None]].mean(axis=1)
+    low, high = np.percentile(distribution, [2.5, 97.5])
+    return ({"mean": float(run_means.mean()), "std": float(run_means.std(ddof=1)) if len(runs) > 1 else 0.0,
+             "ci95": [float(low), float(high)], "iqm": float(stats.trim_mean(run_means, 0.25)),
+             "run_means": [float(m) for m in run_means]}, distribution)
+
+
+def probability_of_improvement(a: Sequence[Sequence[float]], b: Sequence[Sequence[float]]) -> float:
+    """P(an episode of a run of ``a`` scores above one of a run of ``b``), ties counted half, averaged over every
+    pair of runs (a's per-run episode values against b's; Agarwal et al. 2021's probability of improvement)."""
+    pairs = []
+    for x in a:
+        for y in b:
+            x_sorted, y_array = np.sort(np.asarray(x, float)), np.asarray(y, float)
+            below = np.searchsorted(x_sorted, y_array, side="right")  # a-values <= each b-value
+            strictly = np.searchsorted(x_sorted, y_array, side="left")  # a-values < each b-value
+            above = len(x_sorted) - below
+            ties = below - strictly
+            pairs.append(float((above + 0.5 * ties).sum()) / (len(x_sorted) * len(y_array)))
+    return float(np.mean(pairs))

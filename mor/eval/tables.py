@@ -47,7 +47,7 @@ ANY = object()
 
 
 def _ours(method: str, **setting: Any) -> dict[str, Any]:
-    return {"method": method, "arena": "rect", "policy_arena": "rect", "n_objects": 3, **setting}
+    return {"method": method, "arena": "square", "policy_arena": "square", "n_objects": 3, **setting}
 
 
 def _eval(method: str, extra: str = "") -> str:
@@ -98,7 +98,7 @@ TABLES: dict[int, TableSpec] = {
                  paper.TABLE3["ResNet50 + ΔPose"],
                  "mor --setting polygon policy train --variant baseline_img / --variant baseline_delta_pose; "
                  + _in("polygon", _eval("baseline_delta_pose"))),
-        TableRow("Ours (lnet), policies trained in rect: zero-shot", _ours("lnet", arena="polygon"),
+        TableRow("Ours (lnet), policies trained in the square arena: zero-shot", _ours("lnet", arena="polygon"),
                  paper.TABLE3["W/o fine tuning"], f"{POLYGON_LNET}; " + _in("polygon", _eval("lnet", " --zero-shot"))),
         TableRow("Ours (lnet), policies fine-tuned in the polygon arena",
                  _ours("lnet", arena="polygon", policy_arena="polygon"), paper.TABLE3["Fine tuning"],
@@ -112,7 +112,7 @@ TABLES: dict[int, TableSpec] = {
 def find_row(rows: list[dict[str, Any]], match: dict[str, Any]) -> dict[str, Any] | None:
     """The results row whose fields equal ``match`` (``ANY``: any value; the encoder is unset unless ``match``
     names one)."""
-    wanted = {"encoder": None, **match}
+    wanted = {"encoder": None, "episodes": None, **match}  # the protocol's episodes unless ``match`` says otherwise
     for row in rows:
         if all(value is ANY or row.get(key) == value for key, value in wanted.items()):
             return row
@@ -299,7 +299,7 @@ def _learning_curves(row: dict[str, Any]) -> str:
     workspace = "." if is_zero_shot(row) else row.get("workspace", ".")  # zero-shot: the main workspace's policies
     trained = row.get("train_steps") or {}
     folder = posixpath.normpath(f"../../{workspace}/cards/policy")
-    links = [f"[{task}]({folder}/{owner}/{task}/learning_curve.png)"
+    links = [f"[{task}]({folder}/{owner.name}/{task}/learning_curve.png)"
              for task, owner in method.skill_owners().items() if trained.get(task)]
     return ", ".join(links)
 

@@ -75,7 +75,7 @@ def write_policy_video(path: Path, sim: SimConfig, tracker: BatchTracker, skills
     (``tracker`` keeps one environment; the skills read ``encode``'s inputs) and write it to ``path`` (.mp4 or
     .gif), with a progress bar over the steps and then the frames; returns the episode's metrics."""
     env_kwargs = {} if horizon is None else {"horizon": horizon}
-    env = make_task_env("decision", sim, True, **env_kwargs)
+    env = make_task_env("rearrange", sim, True, **env_kwargs)
     hierarchy, record = SkillHierarchy([env], tracker, skills, encode, "decision"), _Recorder()
     bar = tqdm(total=env.horizon, desc="playing", unit="step", dynamic_ncols=True)
 

@@ -1,3 +1,3 @@
-"""The policy layer: observation wrappers (gt_pose / lnet / lnet_no_uncertainty), MaskablePPO pick and drop
+"""The policy layer: the variants (``mor.policy.variants``), their observation wrappers, MaskablePPO pick and drop
 skills, and the decision policy that chains them (paper section 4.2). Above ``mor.lnet``; nothing below
 imports it."""

@@ -11,7 +11,7 @@ Inputs (``BaselineInput``), as in paper Table 1:
 - ``landmark``: ``img`` in an arena that shows a marker at each drop target (paper Figure 4).
 
 Pick sees the same inputs in all three (the extra cues are about drop targets), so one Pick baseline serves
-every row (``PICK_FROM``). The full task chains the two skills in object order (docs/assumptions.md,
+every row (``Variant.pick_from``). The full task chains the two skills in object order (docs/assumptions.md,
 "Baselines"): a baseline has no pose estimate to choose the nearest object or to tell a placed one.
 
 Encoders (``BaselineEncoder``): ``nature_cnn``, stable-baselines3's NatureCNN (the ``default`` profile's compact
@@ -34,15 +34,14 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, NatureC
 
 from mor.lnet.model import build_encoder
 
-from mor.policy.names import BaselineVariant, Task
+from mor.policy.names import Task
+from mor.policy.params import BaselineParams
+from mor.policy.variants import BaselineInput, Variant
 from mor.sim.catalog import N_CLASSES
 from mor.sim.geometry import bearing
 from mor.sim.tasks import DropEnv, PickEnv
 
-BaselineInput = Literal["img", "delta_pose", "landmark"]
 BaselineEncoder = Literal["nature_cnn", "compact", "resnet18", "resnet50"]
-BASELINE_INPUTS: dict[BaselineVariant, BaselineInput] = {
-    "baseline_img": "img", "baseline_delta_pose": "delta_pose", "baseline_landmark": "landmark"}
 
 
 def baseline_space(task: Task, input_kind: BaselineInput, image_shape: tuple[int, int, int], arena_half: float
@@ -80,10 +79,10 @@ def baseline_observation(task: Task, input_kind: BaselineInput, observation: dic
     return result
 
 
-def baseline_inputs(variant: BaselineVariant) -> Callable[..., dict[str, np.ndarray]]:
+def baseline_inputs(variant: Variant) -> Callable[..., dict[str, np.ndarray]]:
     """The evaluation's encoding of k envs for a baseline's skills (``mor.policy.features.Encode``): their
     ``baseline_observation``s stacked; the beliefs are not read (a baseline sees pixels and its goal only)."""
-    input_kind = BASELINE_INPUTS[variant]
+    input_kind = variant.baseline_input
 
     def encode(task: Task, observations: list[dict[str, Any]], infos: list[dict[str, Any]], belief: Any,
                goals: np.ndarray, arena: Any) -> dict[str, np.ndarray]:
@@ -149,3 +148,9 @@ class BaselineExtractor(BaseFeaturesExtractor):
         """observations: image (N, 3, H, W) scaled to [0, 1] by SB3, the rest (N, ...) -> (N, features_dim)."""
         parts = [self.encoder(observations["image"])] + [observations[key].flatten(1) for key in self.keys]
         return torch.cat(parts, dim=1)
+
+
+def baseline_extractor(settings: BaselineParams) -> dict[str, Any]:
+    """SB3 ``policy_kwargs`` of a baseline skill: ``BaselineExtractor`` with the profile's encoder and width."""
+    return {"features_extractor_class": BaselineExtractor,
+            "features_extractor_kwargs": {"encoder": settings.encoder, "image_features": settings.image_features}}

@@ -1,7 +1,8 @@
-"""What a policy knows of the world at one step: a Gaussian belief over the agent's and the objects' poses.
+"""What a policy knows of the world at one step: a Gaussian belief over the agent's and the objects' poses, and
+what the L-Net states beyond it (which objects it has not found, which it may have lost, where it has not looked).
 
-Every policy variant reads the same belief. ``gt_pose`` fills it from the simulator's truth (zero covariances,
-zero heading variance), ``lnet`` and ``lnet_no_uncertainty`` from the L-Net's estimates. The observation
+Every pose variant (``mor.policy.variants``) reads the same belief: the ground truth's variant fills it from the
+simulator's truth (zero covariances, zero heading variance), the L-Net variants from the L-Net's estimates. The observation
 layout built from it is in ``mor.policy.features``.
 """
 
@@ -21,6 +22,11 @@ class PoseBelief:
 
     agent_mean (N, 2); agent_cov (N, 2, 2) m²; heading (N,) rad; heading_var (N,) rad² (1/κ of the von Mises,
     0 for the truth); object_mean (N, n, 2) (a held object sits at the agent); object_cov (N, n, 2, 2) m².
+    The stated belief's parts (``mor.lnet.stated``; None where the source states none, as the truth):
+    object_found (N, n) 1.0 where the belief has found its object, 0.0 where it is still the search belief;
+    object_lost (N, n) the probability that the object is not where its Gaussian says; search_sectors (N, S) the
+    search belief's mass in ``SEARCH_SECTORS`` bearing sectors x ``SEARCH_RINGS`` range rings around the agent
+    (``mor.policy.search_view``; all zero when nothing is searched).
     """
 
     agent_mean: Float
@@ -29,6 +35,9 @@ class PoseBelief:
     heading_var: Float
     object_mean: Float
     object_cov: Float
+    object_found: Float | None = None
+    object_lost: Float | None = None
+    search_sectors: Float | None = None
 
     @property
     def n_envs(self) -> int:
@@ -56,4 +65,5 @@ class PoseBelief:
     def take(self, index: NDArray | int) -> PoseBelief:
         """The belief of the environments ``index`` (an int keeps a batch of one)."""
         index = np.atleast_1d(index)
-        return PoseBelief(*(getattr(self, name)[index] for name in self.__dataclass_fields__))
+        return PoseBelief(*(None if getattr(self, name) is None else getattr(self, name)[index]
+                            for name in self.__dataclass_fields__))

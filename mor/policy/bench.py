@@ -1,6 +1,13 @@
-"""``mor bench policy``: in one run, the environment's step rate on the no-render path (gt_pose), with rendering
-and the L-Net at N envs (environments in this process, and one process each), and PPO's training rate for each
-(steps/s, medians over repeats)."""
+"""``mor bench policy``: in one run, the environment's step rate on the no-render path (the ground truth's), with
+rendering and the L-Net at N envs (environments in this process, and one process each), and PPO's training rate for
+each (steps/s, medians over repeats).
+
+The ground truth's path (keys named after its variant, ``GROUND_TRUTH.name``) is measured twice at the profile's
+N: on the batched env (``mor.policy.batched_env``, what ``vec_env: batched`` trains on) and, as ``..._per_env``, on N
+``PoseObservation`` envs in a ``DummyVecEnv`` (``vec_env: dummy``); ``batched_over_per_env`` is their ratio. The
+batched env's step rate is also taken at ``BATCHED_N_ENVS`` environments (``..._n64``), where its per-step costs are
+spread wider. Actions are uniform over each env's unmasked ones, drawn for all N at once.
+"""
 
 from __future__ import annotations
 
@@ -12,9 +19,14 @@ import torch
 from sb3_contrib import MaskablePPO
 
 from mor.lnet.runtime import LNetRunner
+from mor.policy.batched_env import BatchedPoseVecEnv
 from mor.policy.envs import make_training_env
 from mor.policy.params import PPOParams
+from mor.policy.variants import GROUND_TRUTH, OURS
 from mor.sim.config import SimConfig
+
+#: the batched env's step rate is also measured at this many environments
+BATCHED_N_ENVS: int = 64
 
 
 def _random_step_rate(env: Any, seconds: float, rng: np.random.Generator) -> float:
@@ -23,7 +35,7 @@ def _random_step_rate(env: Any, seconds: float, rng: np.random.Generator) -> flo
     steps, start = 0, time.perf_counter()
     while time.perf_counter() - start < seconds:
         masks = np.stack(env.env_method("action_masks"))
-        env.step(np.array([rng.choice(np.flatnonzero(m)) for m in masks]))
+        env.step(np.argmax(masks * rng.random(masks.shape), axis=1))  # uniform over each row's unmasked actions
         steps += env.num_envs
     return steps / (time.perf_counter() - start)
 
@@ -46,20 +58,31 @@ def bench_policy(sim: SimConfig, params: PPOParams, runner: LNetRunner, seconds:
     """Steps/s of each path (``seconds`` each, ``repeats`` times; medians), all in this one process."""
     torch.set_num_threads(1)
     rng = np.random.default_rng(0)
-    envs = {"gt_pose": make_training_env("pick", "gt_pose", sim, params),
-            "lnet": make_training_env("pick", "lnet", sim, params.model_copy(update={"vec_env": "dummy"}), runner),
-            "lnet_subproc": make_training_env("pick", "lnet", sim, params.model_copy(update={"vec_env": "subproc"}),
-                                              runner)}
+
+    def with_vec_env(kind: str) -> PPOParams:
+        return params.model_copy(update={"vec_env": kind})
+
+    truth = GROUND_TRUTH.name
+    envs = {truth: make_training_env("pick", GROUND_TRUTH, sim, with_vec_env("batched")),
+            f"{truth}_per_env": make_training_env("pick", GROUND_TRUTH, sim, with_vec_env("dummy")),
+            OURS.name: make_training_env("pick", OURS, sim, with_vec_env("dummy"), runner),
+            f"{OURS.name}_subproc": make_training_env("pick", OURS, sim, with_vec_env("subproc"), runner)}
+    wide = BatchedPoseVecEnv("pick", sim, BATCHED_N_ENVS, GROUND_TRUTH.uncertainty)
+    wide_key = f"env_{truth}_n{BATCHED_N_ENVS}"
     runs: dict[str, list[float]] = {f"{kind}_{name}": [] for kind in ("env", "ppo") for name in envs}
+    runs[wide_key] = []
     for repeat in range(repeats):
         for name, env in envs.items():
             runs[f"env_{name}"].append(_random_step_rate(env, seconds, rng))
             runs[f"ppo_{name}"].append(_ppo_rate(env, params, seconds))
+        runs[wide_key].append(_random_step_rate(wide, seconds, rng))
         if progress:
             print(f"repeat {repeat + 1}/{repeats}: " + ", ".join(f"{k} {v[-1]:.0f}/s" for k, v in runs.items()))
-    for env in envs.values():
+    for env in [*envs.values(), wide]:
         env.close()
+    rates = {k: float(np.median(v)) for k, v in runs.items()}
     return {"n_envs": params.n_envs, "image_size": sim.image_size, "seconds_per_measure": seconds,
-            "repeats": repeats, "lnet_encoder": runner.config.encoder,
-            "steps_per_second": {k: float(np.median(v)) for k, v in runs.items()},
-            "runs": runs, "targets": {"ppo_gt_pose": 5000, "ppo_lnet": 1000}}
+            "repeats": repeats, "lnet_encoder": runner.config.encoder, "steps_per_second": rates,
+            "batched_over_per_env": {kind: round(rates[f"{kind}_{truth}"] / rates[f"{kind}_{truth}_per_env"], 2)
+                                     for kind in ("env", "ppo")},
+            "runs": runs, "targets": {f"ppo_{truth}": 5000, f"ppo_{OURS.name}": 1000, wide_key: 50000}}

@@ -8,78 +8,90 @@ import gymnasium as gym
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 
 from mor.errors import ConfigError
+from mor.policy.batched_env import BATCHED_TASKS, BatchedPoseVecEnv
 from mor.policy.hierarchy import HierarchicalRearrange, Skill
-from mor.policy.names import BaselineVariant, Task, Variant
-from mor.policy.observations import GroundTruthTracker, PoseObservation, SingleTracker, has_uncertainty
+from mor.policy.names import PLAYS, Task, WorldTask
+from mor.policy.observations import GroundTruthTracker, PoseObservation, SingleTracker
 from mor.policy.params import PPOParams
+from mor.policy.variants import Variant
+from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
 
 if TYPE_CHECKING:
     from mor.lnet.runtime import LNetRunner
 
-ENV_IDS: dict[Task, str] = {"pick": "MOR/Pick-v0", "drop": "MOR/Drop-v0", "decision": "MOR/Rearrange-v0"}
+ENV_IDS: dict[WorldTask, str] = {"pick": "MOR/Pick-v0", "drop": "MOR/Drop-v0", "rearrange": "MOR/Rearrange-v0"}
 
 
-def make_task_env(task: Task, sim: SimConfig, render_frames: bool, **kwargs: object) -> gym.Env:
-    """The MOR environment of ``task`` (decision: the full task), with or without first-person frames; ConfigError
-    naming the policy tasks for any other ``task``."""
+def make_task_env(task: WorldTask, sim: SimConfig, render_frames: bool, **kwargs: object) -> gym.Env:
+    """The MOR environment of the world's ``task``, with or without first-person frames; ConfigError naming the tasks
+    for any other ``task`` (a policy's name: ``PLAYS`` says which task it plays)."""
     if task not in ENV_IDS:
-        raise ConfigError(f"task: {task!r} is not a policy's task; choose one of {', '.join(ENV_IDS)} "
-                          f"(decision plays the full rearrangement)")
+        raise ConfigError(f"task: {task!r} is not one of the world's tasks; choose one of {', '.join(ENV_IDS)}")
     return gym.make(ENV_IDS[task], render_frames=render_frames, **sim.model_dump(), **kwargs).unwrapped
 
 
 def make_policy_env(
     task: Task, sim: SimConfig, tracker: SingleTracker, uncertainty: bool, skills: tuple[Skill, Skill] | None = None,
-    **env_kwargs: object,
+    search: bool = False, **env_kwargs: object,
 ) -> gym.Env:
     """One environment with the policy's observation vector: a ``PoseObservation`` of Pick/Drop, or, for the
     decision, the ``HierarchicalRearrange`` semi-MDP over the frozen ``skills`` (pick, drop). Frames are rendered
-    only when the tracker reads them (never for the ground truth); ``env_kwargs`` go to the MOR env."""
-    env = make_task_env(task, sim, not isinstance(tracker, GroundTruthTracker), **env_kwargs)
+    only when the tracker reads them (never for the ground truth); ``env_kwargs`` go to the MOR env. search: the
+    vector holds the stated belief's parts (``mor.policy.features``; the tracker must keep the search looks)."""
+    if task not in PLAYS:
+        raise ConfigError(f"task: {task!r} is not a policy; choose one of {', '.join(PLAYS)}")
+    env = make_task_env(PLAYS[task], sim, not isinstance(tracker, GroundTruthTracker), **env_kwargs)
     if task == "decision":
         if skills is None:
             raise ValueError("the decision policy's environment needs the trained pick and drop skills")
-        return HierarchicalRearrange(env, tracker.batch, *skills, uncertainty)
-    return PoseObservation(env, tracker, uncertainty)
+        return HierarchicalRearrange(env, tracker.batch, *skills, uncertainty, search=search)
+    return PoseObservation(env, tracker, uncertainty, search)
 
 
 def make_training_env(
     task: Task, variant: Variant, sim: SimConfig, params: PPOParams, runner: LNetRunner | None = None,
     skills: tuple[Skill, Skill] | None = None,
 ) -> VecEnv:
-    """``params.n_envs`` environments of ``task`` with ``variant``'s observation vector, for SB3.
+    """``params.n_envs`` environments of ``task`` with ``variant``'s observation, for SB3.
 
-    gt_pose: ``PoseObservation`` envs without rendering. L-Net variants: for Pick/Drop rendered envs under
+    A baseline: rendered Pick or Drop envs seen through ``BaselineObservation`` (``variant_sim``'s world). The truth's
+    variant: ``PoseObservation`` envs without rendering. L-Net variants: for Pick/Drop rendered envs under
     ``LNetVecObservation``, one batched L-Net forward per vector step in this process; for the decision each env
     tracks its own belief (decisions last different numbers of steps) in this process. The envs run in this process
     (``vec_env: dummy``) or one process each (``subproc``; not for the L-Net decision, whose tracker holds the model).
     """
     from mor.policy.lnet_tracking import LNetTracker, LNetVecObservation  # noqa: PLC0415 - torch only for L-Net
 
-    uncertainty = has_uncertainty(variant)
+    if variant.is_baseline:
+        return _baseline_training_env(task, variant, sim, params)
+    uncertainty = variant.uncertainty
     vec_env = SubprocVecEnv if params.vec_env == "subproc" else DummyVecEnv
-    if variant == "gt_pose":
+    if variant.source == "truth":
+        if params.vec_env == "batched" and task in BATCHED_TASKS:
+            return BatchedPoseVecEnv(task, sim, params.n_envs, uncertainty)
         return vec_env([lambda: make_policy_env(task, sim, GroundTruthTracker(), uncertainty, skills)] * params.n_envs)
     if runner is None:
-        raise ValueError(f"variant {variant!r} needs the trained L-Net (runner)")
+        raise ValueError(f"variant {variant.name!r} needs the trained L-Net (runner)")
+    search = variant.search
     if task == "decision":
-        return DummyVecEnv([lambda: make_policy_env(task, sim, LNetTracker(runner), uncertainty, skills)]
+        arena = Arena.build(sim.arena, sim.arena_size) if search else None
+        return DummyVecEnv([lambda: make_policy_env(task, sim, LNetTracker(runner, arena), uncertainty, skills, search)]
                            * params.n_envs)
-    raw = vec_env([lambda: make_task_env(task, sim, render_frames=True)] * params.n_envs)
-    return LNetVecObservation(raw, runner, task, sim.n_objects, uncertainty)
+    raw = vec_env([lambda: make_task_env(PLAYS[task], sim, render_frames=True)] * params.n_envs)
+    return LNetVecObservation(raw, runner, task, sim.n_objects, uncertainty, search)
 
 
-def baseline_sim(variant: BaselineVariant, sim: SimConfig) -> SimConfig:
-    """The world a baseline plays in: ``baseline_landmark`` shows a marker at each drop target."""
-    return sim.model_copy(update={"landmark": True}) if variant == "baseline_landmark" else sim
+def variant_sim(variant: Variant, sim: SimConfig) -> SimConfig:
+    """The world a variant plays in: ``sim``, with a marker at each drop target where the variant says ``landmark``."""
+    return sim.model_copy(update={"landmark": True}) if variant.landmark else sim
 
 
-def make_baseline_training_env(task: Task, variant: BaselineVariant, sim: SimConfig, params: PPOParams) -> VecEnv:
+def _baseline_training_env(task: Task, variant: Variant, sim: SimConfig, params: PPOParams) -> VecEnv:
     """``params.n_envs`` rendered Pick or Drop envs seen through ``BaselineObservation``, for SB3."""
-    from mor.policy.baselines import BASELINE_INPUTS, BaselineObservation  # noqa: PLC0415 - torch only here
+    from mor.policy.baselines import BaselineObservation  # noqa: PLC0415 - torch only here
 
-    world = baseline_sim(variant, sim)
+    world = variant_sim(variant, sim)
     vec_env = SubprocVecEnv if params.vec_env == "subproc" else DummyVecEnv
-    return vec_env([lambda: BaselineObservation(make_task_env(task, world, render_frames=True),
-                                                BASELINE_INPUTS[variant])] * params.n_envs)
+    return vec_env([lambda: BaselineObservation(make_task_env(PLAYS[task], world, render_frames=True),
+                                                variant.baseline_input)] * params.n_envs)

@@ -14,6 +14,8 @@ triple is [σ_forward m, σ_left m, correlation] of a covariance rotated into th
     decision  each object: target x, y, object-to-target distance, polar of the target   6 n
 - uncertainty (left out when ``uncertainty=False``): the agent's triple and heading σ (4), each object's
   triple (3 n), and for pick the goal object's triple (3)
+- the stated belief (only with ``search=True``): each object's found flag and lost probability (2 n), for pick
+  the goal object's (2), and the search belief's mass around the agent (``mor.policy.search_view``, 16)
 
 The egocentric polar features are computed from the same global belief (they tell the policy nothing new),
 but without them PPO does not learn Pick (docs/assumptions.md, "Policies").
@@ -30,11 +32,12 @@ from numpy.typing import NDArray
 from mor.policy.belief import PoseBelief
 from mor.policy.clearance import RAY_ANGLES, clearance
 from mor.policy.names import Task
+from mor.policy.search_view import SEARCH_RINGS, SEARCH_SECTORS, sector_names
 from mor.sim.arena import Arena
 
 
 
-def feature_names(task: Task, n_objects: int, uncertainty: bool) -> list[str]:
+def feature_names(task: Task, n_objects: int, uncertainty: bool, search: bool = False) -> list[str]:
     """The name of each entry of ``observation_vector``'s output, in order."""
     polar = ("distance", "cos_bearing", "sin_bearing")
     names = ["agent_x", "agent_y", "agent_cos", "agent_sin"]
@@ -56,11 +59,15 @@ def feature_names(task: Task, n_objects: int, uncertainty: bool) -> list[str]:
             names += [f"object{i}_{t}" for t in triple]
         if task == "pick":
             names += [f"goal_{t}" for t in triple]
+    if search:
+        names += [f"object{i}_{part}" for i in range(n_objects) for part in ("found", "lost")]
+        names += ["goal_found", "goal_lost"] if task == "pick" else []
+        names += sector_names()
     return names
 
 
-def observation_size(task: Task, n_objects: int, uncertainty: bool) -> int:
-    return len(feature_names(task, n_objects, uncertainty))
+def observation_size(task: Task, n_objects: int, uncertainty: bool, search: bool = False) -> int:
+    return len(feature_names(task, n_objects, uncertainty, search))
 
 
 def _polar(belief: PoseBelief, points: NDArray) -> NDArray:
@@ -76,7 +83,7 @@ def _polar(belief: PoseBelief, points: NDArray) -> NDArray:
 
 def _ego_uncertainty(covariance: NDArray, heading: NDArray) -> NDArray:
     """covariance (N, ..., 2, 2) world, heading (N,) -> (N, ..., 3) [σ_forward, σ_left, correlation] in ego."""
-    if not covariance.any():  # the ground truth: no rotation needed (a third of a gt_pose step's cost)
+    if not covariance.any():  # the ground truth: no rotation needed (a third of a step's cost on the true poses)
         return np.zeros((*covariance.shape[:-2], 3), np.float32)
     c, s = np.cos(heading), np.sin(heading)
     rotation = np.stack([np.stack([c, s], -1), np.stack([-s, c], -1)], -2)  # world -> ego, (N, 2, 2)
@@ -88,9 +95,11 @@ def _ego_uncertainty(covariance: NDArray, heading: NDArray) -> NDArray:
 
 
 def observation_vector(
-    belief: PoseBelief, held: NDArray, task: Task, goal: NDArray, uncertainty: bool, arena: Arena
+    belief: PoseBelief, held: NDArray, task: Task, goal: NDArray, uncertainty: bool, arena: Arena,
+    search: bool = False,
 ) -> NDArray[np.float32]:
-    """The flat observation (N, D) of ``feature_names(task, n, uncertainty)`` in ``arena`` (its walls are known).
+    """The flat observation (N, D) of ``feature_names(task, n, uncertainty, search)`` in ``arena`` (its walls are
+    known). A belief without stated parts (the truth's) states every object found, none lost, nothing searched.
 
     held (N,) index of the held object, n when none (the env's convention). goal by task: pick (N,) object
     index; drop (N, 2) target position, m; decision (N, n, 2) every object's target position, m.
@@ -116,7 +125,21 @@ def observation_vector(
         parts += [_ego_uncertainty(belief.agent_cov, belief.heading), heading_sigma, objects.reshape(n_envs, -1)]
         if task == "pick":
             parts.append(objects[rows, np.asarray(goal, int).reshape(n_envs)])
+    if search:
+        parts += _stated(belief, task, goal)
     return np.concatenate([np.asarray(p, np.float32).reshape(n_envs, -1) for p in parts], -1)
+
+
+def _stated(belief: PoseBelief, task: Task, goal: NDArray) -> list[NDArray]:
+    """The stated belief's features: (found, lost) per object, the goal's for pick, and the search sectors."""
+    n_envs, n = belief.n_envs, belief.n_objects
+    found = np.ones((n_envs, n), np.float32) if belief.object_found is None else belief.object_found
+    lost = np.zeros((n_envs, n), np.float32) if belief.object_lost is None else belief.object_lost
+    pairs = np.stack([found, lost], -1)                                                  # (N, n, 2)
+    sectors = (np.zeros((n_envs, SEARCH_SECTORS * SEARCH_RINGS), np.float32) if belief.search_sectors is None
+               else belief.search_sectors)
+    goal_pair = [pairs[np.arange(n_envs), np.asarray(goal, int).reshape(n_envs)]] if task == "pick" else []
+    return [pairs.reshape(n_envs, -1), *goal_pair, sectors]
 
 
 #: (skill task, the k envs' MOR observations, their infos, their beliefs, goals (k, ...), arena) -> the skill's
@@ -126,11 +149,12 @@ Encode = Callable[[Task, list[dict[str, Any]], list[dict[str, Any]], PoseBelief,
                   np.ndarray | dict[str, np.ndarray]]
 
 
-def pose_inputs(uncertainty: bool) -> Encode:
-    """The pose policies' encoding: ``observation_vector`` of the beliefs (with or without their uncertainty)."""
+def pose_inputs(uncertainty: bool, search: bool = False) -> Encode:
+    """The pose policies' encoding: ``observation_vector`` of the beliefs (with or without their uncertainty, with
+    or without the stated belief's parts)."""
     def encode(task: Task, observations: list[dict[str, Any]], infos: list[dict[str, Any]], belief: PoseBelief,
                goals: np.ndarray, arena: Arena) -> np.ndarray:
         held = np.array([o["held"] for o in observations])
-        return observation_vector(belief, held, task, goals, uncertainty, arena)
+        return observation_vector(belief, held, task, goals, uncertainty, arena, search)
 
     return encode

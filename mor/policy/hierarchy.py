@@ -165,8 +165,10 @@ class Slot:
         return np.asarray(self.observation["target_positions"])
 
     def outcome(self) -> dict[str, Any]:
-        """The finished episode: the task's metrics, its primitive steps and return."""
-        return {"metrics": dict(self.info["metrics"]), "steps": self.steps, "return": self.total}
+        """The finished episode: the task's metrics, its primitive steps and return, and how it ended where the
+        environment says (``info["ending"]``, e.g. ``mor.eval.failures.EndingDiary``)."""
+        return {"metrics": dict(self.info["metrics"]), "steps": self.steps, "return": self.total,
+                **({"ending": self.info["ending"]} if "ending" in self.info else {})}
 
 
 class SkillPolicy:
@@ -325,15 +327,15 @@ class HierarchicalRearrange(gym.Env):
     metadata = {"render_modes": []}
 
     def __init__(self, env: gym.Env, tracker: BatchTracker, pick: Skill, drop: Skill, uncertainty: bool = True,
-                 encode: Encode | None = None) -> None:
+                 encode: Encode | None = None, search: bool = False) -> None:
         if not isinstance(env.unwrapped, RearrangeEnv):
             raise TypeError(f"HierarchicalRearrange needs MOR/Rearrange-v0, got {type(env.unwrapped).__name__}")
-        self.env, self.uncertainty = env, uncertainty
-        self.hierarchy = SkillHierarchy([env], tracker, {"pick": pick, "drop": drop}, encode or pose_inputs(uncertainty),
-                                        "decision")
+        self.env, self.uncertainty, self.search = env, uncertainty, search
+        self.hierarchy = SkillHierarchy([env], tracker, {"pick": pick, "drop": drop},
+                                        encode or pose_inputs(uncertainty, search), "decision")
         self.slot = self.hierarchy.slots[0]
         self.n_objects = env.unwrapped.config.n_objects
-        self.observation_space = observation_space("decision", self.n_objects, uncertainty)
+        self.observation_space = observation_space("decision", self.n_objects, uncertainty, search)
         self.action_space = spaces.Discrete(self.n_objects)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
@@ -369,4 +371,4 @@ class HierarchicalRearrange(gym.Env):
 
     def _decision_vector(self) -> np.ndarray:
         return observation_vector(self.belief, np.array([self.slot.held]), "decision", self.slot.targets[None],
-                                  self.uncertainty, self.hierarchy.arena)[0]
+                                  self.uncertainty, self.hierarchy.arena, self.search)[0]

@@ -1,23 +1,17 @@
-"""The names the policy layer's parameters use (no heavy imports: ``mor.config`` reads them)."""
+"""The names of the world's tasks and of the policies that play them (no heavy imports: ``mor.config`` reads
+them)."""
 
 from __future__ import annotations
 
 from typing import Literal
 
+#: the world's tasks (paper section 3.2): ``MOR/Pick-v0``, ``MOR/Drop-v0``, ``MOR/Rearrange-v0``
+WorldTask = Literal["pick", "drop", "rearrange"]
+WORLD_TASKS: tuple[WorldTask, ...] = ("pick", "drop", "rearrange")
+#: the policies of the hierarchy: the pick and drop skills, and the decision policy
 Task = Literal["pick", "drop", "decision"]
 TASKS: tuple[Task, ...] = ("pick", "drop", "decision")
-
-Variant = Literal["gt_pose", "lnet", "lnet_no_uncertainty"]
-VARIANTS: tuple[Variant, ...] = ("gt_pose", "lnet", "lnet_no_uncertainty")
-
-#: the paper's end-to-end CNN baselines (mor.policy.baselines): +Img, +ΔPose, +Landmark
-BaselineVariant = Literal["baseline_img", "baseline_delta_pose", "baseline_landmark"]
-BASELINE_VARIANTS: tuple[BaselineVariant, ...] = ("baseline_img", "baseline_delta_pose", "baseline_landmark")
-
-#: the variant whose Pick policy each baseline uses (Pick's inputs are the same in all three)
-PICK_FROM: BaselineVariant = "baseline_img"
-
-
-def baseline_tasks(variant: BaselineVariant) -> tuple[Task, ...]:
-    """The skills a baseline variant trains itself: all but ``PICK_FROM`` reuse its Pick."""
-    return ("pick", "drop") if variant == PICK_FROM else ("drop",)
+#: the world's task each policy plays (the decision policy plays the full rearrangement, one decision at a time)
+PLAYS: dict[Task, WorldTask] = dict(zip(TASKS, WORLD_TASKS, strict=True))
+#: the policy that plays each of the world's tasks
+PLAYED_BY: dict[WorldTask, Task] = {world: policy for policy, world in PLAYS.items()}

@@ -15,14 +15,9 @@ from gymnasium import spaces
 
 from mor.policy.belief import PoseBelief
 from mor.policy.features import observation_size, observation_vector
-from mor.policy.names import Task, Variant
+from mor.policy.names import Task
 from mor.sim.tasks import DropEnv, PickEnv, RearrangeEnv
 
-
-
-def has_uncertainty(variant: Variant) -> bool:
-    """Whether a variant's observation carries covariances and the heading's spread."""
-    return variant != "lnet_no_uncertainty"
 
 
 def task_of(env: gym.Env) -> Task:
@@ -40,8 +35,8 @@ def task_goal(observation: dict[str, Any], task: Task) -> np.ndarray:
     return np.asarray(observation[key])
 
 
-def observation_space(task: Task, n_objects: int, uncertainty: bool) -> spaces.Box:
-    return spaces.Box(-np.inf, np.inf, (observation_size(task, n_objects, uncertainty),), np.float32)
+def observation_space(task: Task, n_objects: int, uncertainty: bool, search: bool = False) -> spaces.Box:
+    return spaces.Box(-np.inf, np.inf, (observation_size(task, n_objects, uncertainty, search),), np.float32)
 
 
 class BatchTracker(Protocol):
@@ -108,13 +103,13 @@ class PoseObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
     ``spec.make()`` (Gymnasium's ``check_env``) builds it again.
     """
 
-    def __init__(self, env: gym.Env, tracker: Tracker, uncertainty: bool = True) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, tracker=tracker, uncertainty=uncertainty)
+    def __init__(self, env: gym.Env, tracker: Tracker, uncertainty: bool = True, search: bool = False) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, tracker=tracker, uncertainty=uncertainty, search=search)
         super().__init__(env)
         self.task: Task = task_of(env)
         self.tracker = tracker
-        self.uncertainty = uncertainty
-        self.observation_space = observation_space(self.task, env.unwrapped.config.n_objects, uncertainty)
+        self.uncertainty, self.search = uncertainty, search
+        self.observation_space = observation_space(self.task, env.unwrapped.config.n_objects, uncertainty, search)
         self.belief: PoseBelief | None = None
 
     def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
@@ -133,4 +128,4 @@ class PoseObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def _vector(self, observation: dict[str, Any]) -> np.ndarray:
         goal = task_goal(observation, self.task)[None]
         return observation_vector(self.belief, np.array([observation["held"]]), self.task, goal, self.uncertainty,
-                                  self.env.unwrapped.arena)[0]
+                                  self.env.unwrapped.arena, self.search)[0]

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from mor.params_model import ParamsModel, Seeds
-from mor.policy.names import VARIANTS, Task, Variant
+from mor.policy.names import Task
+from mor.policy.variants import POSE_VARIANTS
 
 
 class PPOParams(ParamsModel):
@@ -17,7 +18,9 @@ class PPOParams(ParamsModel):
     steps: int = Field(300_000, ge=0, description="environment steps (decisions, for the decision policy); 0 with a "
                                                    "warm start keeps the starting policy as it is")
     n_envs: int = Field(8, ge=1, le=256)
-    vec_env: Literal["dummy", "subproc"] = "dummy"
+    vec_env: Literal["dummy", "subproc", "batched"] = Field(
+        "dummy", description="dummy: the envs in this process; subproc: one process each; batched: the ground truth's "
+                             "Pick and Drop as one array-stepped env (mor.policy.batched_env), the rest as dummy")
     hidden: list[int] = Field(default_factory=lambda: [256, 256, 256, 256], min_length=1)
     n_steps: int = Field(256, ge=2, description="steps per env per rollout")
     batch_size: int = Field(512, ge=2)
@@ -48,19 +51,30 @@ class BaselineParams(ParamsModel):
 class PolicyParams(ParamsModel):
     """Phase I (pick, drop) and phase II (decision) training for each observation variant."""
 
-    seed: int = Field(0, ge=0)
-    variants: list[Variant] = Field(default_factory=lambda: list(VARIANTS), min_length=1)
+    training_seeds: Seeds = Field(default_factory=lambda: [0], description="the training runs of every learned "
+                                  "variant (mor policy train --seed overrides); a row aggregates over them")
+    variants: list[str] = Field(default_factory=lambda: list(POSE_VARIANTS), min_length=1,
+                                description="the pose variants mor policy train trains by default")
     pick: PPOParams = Field(default_factory=PPOParams)
     drop: PPOParams = Field(default_factory=PPOParams)
     decision: PPOParams = Field(default_factory=lambda: PPOParams(
         steps=10_000, n_envs=4, n_steps=64, batch_size=64, hidden=[128, 128, 128, 128], checkpoint_every=2_000))
     skills_deterministic: bool = Field(False, description="frozen skills act by their most likely action (True) or "
                                                           "draw from their distribution with a per-episode generator")
-    lnet_warm_start: bool = Field(True, description="L-Net variants start from the gt_pose policies (same layout; "
-                                                    "uncertainty inputs zero-weighted) and train lnet_steps more")
+    lnet_warm_start: bool = Field(True, description="L-Net variants start from their warm_start variant's policies "
+                                                    "(mor.policy.variants; same layout, uncertainty inputs "
+                                                    "zero-weighted) and train lnet_steps more")
     baseline: BaselineParams = Field(default_factory=BaselineParams)
     lnet_steps: dict[Task, int] = Field(default_factory=lambda: {"pick": 100_000, "drop": 100_000, "decision": 0},
                                         description="fine-tuning steps of the L-Net variants when warm-started")
+
+    @field_validator("variants")
+    @classmethod
+    def _pose_variants(cls, names: list[str]) -> list[str]:
+        unknown = [name for name in names if name not in POSE_VARIANTS]
+        if unknown:
+            raise ValueError(f"unknown pose variant(s) {unknown}; choose from {', '.join(POSE_VARIANTS)}")
+        return names
 
 
 class EvalParams(ParamsModel):

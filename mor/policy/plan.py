@@ -4,9 +4,10 @@ starts from. ``mor policy plan`` prints it; ``pipelines.train_policy`` runs it.
 Starts (docs/assumptions.md, "Policies"):
 - in a setting with ``finetune_from_main``: the main workspace's policy of the same variant and task (the decision
   only where its action space, one action per object, is the same);
-- otherwise the L-Net variants start from this workspace's ``gt_pose`` policy when ``policy.lnet_warm_start``;
+- otherwise a variant with a ``warm_start`` (``mor.policy.variants``) starts from this workspace's policy of that
+  variant when ``policy.lnet_warm_start``;
 - a policy that starts from another trains ``policy.lnet_steps[task]`` steps, not its task's ``steps``;
-- the baselines train their own skills (``baseline_tasks``) from scratch with ``policy.baseline``'s parameters.
+- the baselines train their own skills (``Variant.trains``) from scratch with ``policy.baseline``'s parameters.
 """
 
 from __future__ import annotations
@@ -15,9 +16,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mor.config import Profile
-from mor.policy.names import BASELINE_VARIANTS, BaselineVariant, Task, Variant, baseline_tasks
+from mor.policy.names import Task
 from mor.policy.params import PPOParams
 from mor.policy.signature import read_signature
+from mor.policy.variants import Variant, policy_folder
 
 
 @dataclass(frozen=True)
@@ -31,29 +33,32 @@ class TaskPlan:
     why: str
 
 
-def _start(profile: Profile, variant: Variant, task: Task, own: Path, main: Path) -> tuple[Path | None, str]:
+def _start(profile: Profile, variant: Variant, task: Task, own: Path, main: Path, seed: int
+           ) -> tuple[Path | None, str]:
     setting, policy = profile.setting, profile.policy
     if setting is not None and setting.finetune_from_main:
-        source = main / variant / task
+        source = policy_folder(main, variant.name, task, seed)
         if task != "decision" or read_signature(source / "meta.json").n_objects == profile.sim.n_objects:
             return source, "fine-tunes the main workspace's policy (setting.finetune_from_main)"
-    if variant != "gt_pose" and policy.lnet_warm_start:
-        return own / "gt_pose" / task, "fine-tunes this workspace's gt_pose policy (policy.lnet_warm_start)"
+    if variant.warm_start is not None and policy.lnet_warm_start:
+        return (policy_folder(own, variant.warm_start, task, seed),
+                f"fine-tunes this workspace's {variant.warm_start} policy (policy.lnet_warm_start)")
     return None, "from a random start"
 
 
-def training_plan(profile: Profile, variant: Variant | BaselineVariant, tasks: tuple[Task, ...], own: Path,
-                  main: Path) -> list[TaskPlan]:
-    """The plan of ``tasks`` (in order) of ``variant``; ``own`` and ``main``: the committed policy folders
-    (``cards/policy``) of this workspace and of the main one."""
+def training_plan(profile: Profile, variant: Variant, tasks: tuple[Task, ...], own: Path, main: Path, seed: int = 0
+                  ) -> list[TaskPlan]:
+    """The plan of ``tasks`` (in order) of ``variant``'s run with training seed ``seed``; ``own`` and ``main``: the
+    committed policy folders (``cards/policy``) of this workspace and of the main one. A run starts from the
+    policies of the same training seed."""
     policy = profile.policy
-    if variant in BASELINE_VARIANTS:
+    if variant.is_baseline:
         return [TaskPlan(task, getattr(policy.baseline, task), None,
                          f"from a random start, encoder {policy.baseline.encoder}")
-                for task in baseline_tasks(variant) if task in tasks]
+                for task in variant.trains if task in tasks]
     plans = []
     for task in tasks:
-        start, why = _start(profile, variant, task, own, main)
+        start, why = _start(profile, variant, task, own, main, seed)
         params = getattr(policy, task)
         if start is not None:
             params = params.model_copy(update={"steps": policy.lnet_steps[task]})

@@ -10,8 +10,8 @@ from pydantic import BaseModel, ConfigDict
 from mor.atomic import atomic_output
 from mor.errors import ConfigError
 from mor.policy.features import feature_names
-from mor.policy.names import BaselineVariant, Task, Variant
-from mor.policy.observations import has_uncertainty
+from mor.policy.names import Task
+from mor.policy.variants import Variant
 
 
 class PolicySignature(BaseModel):
@@ -20,7 +20,7 @@ class PolicySignature(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     task: Task
-    variant: Variant | BaselineVariant
+    variant: str
     n_objects: int
     arena: str
     observation: list[str]
@@ -28,19 +28,20 @@ class PolicySignature(BaseModel):
 
     @classmethod
     def of(cls, task: Task, variant: Variant, n_objects: int, arena: str, lnet_version: str | None) -> PolicySignature:
-        names = feature_names(task, n_objects, has_uncertainty(variant))
-        return cls(task=task, variant=variant, n_objects=n_objects, arena=arena, observation=names,
-                   lnet_version=lnet_version if variant != "gt_pose" else None)
+        """A pose variant's: its ``feature_names``; ``lnet_version`` only where it observes through the L-Net."""
+        names = feature_names(task, n_objects, variant.uncertainty, variant.search)
+        return cls(task=task, variant=variant.name, n_objects=n_objects, arena=arena, observation=names,
+                   lnet_version=lnet_version if variant.uses_lnet else None)
 
     @classmethod
-    def of_baseline(cls, task: Task, variant: BaselineVariant, n_objects: int, arena: str, image_size: int
+    def of_baseline(cls, task: Task, variant: Variant, n_objects: int, arena: str, image_size: int
                     ) -> PolicySignature:
         """A baseline skill's: its observation is ``mor.policy.baselines.baseline_space``, named key(shape)."""
-        from mor.policy.baselines import BASELINE_INPUTS, baseline_space  # noqa: PLC0415 - torch-free callers
+        from mor.policy.baselines import baseline_space  # noqa: PLC0415 - torch-free callers
 
-        space = baseline_space(task, BASELINE_INPUTS[variant], (image_size, image_size, 3), 1.0)
+        space = baseline_space(task, variant.baseline_input, (image_size, image_size, 3), 1.0)
         names = [f"{key}{list(value.shape or (int(value.n),))}" for key, value in space.spaces.items()]
-        return cls(task=task, variant=variant, n_objects=n_objects, arena=arena, observation=names)
+        return cls(task=task, variant=variant.name, n_objects=n_objects, arena=arena, observation=names)
 
 
 def write_signature(path: Path, signature: PolicySignature) -> None:

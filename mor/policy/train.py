@@ -140,7 +140,7 @@ def warm_start(model: MaskablePPO, source: Path, source_names: list[str], names:
 
     Inputs ``model`` has and ``source`` lacks get zero weights, so the copy computes exactly the source's function
     at first (an uncertainty input of an L-Net variant is ignored until fine-tuning learns to use it). Used to
-    start the L-Net variants from the gt_pose policies (docs/assumptions.md, "Policies").
+    start the L-Net variants from their ``warm_start`` variant's policies (docs/assumptions.md, "Policies").
     """
     state = load_policy_file(source).state_dict()
     target = model.policy.state_dict()

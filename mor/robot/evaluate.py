@@ -32,7 +32,7 @@ def make_controller(params: RobotParams, source: str, policy: HierarchyPolicy,
     if source == "aruco":
         pose = ArucoPoseSource(params.tags, params.top_camera, params.corner_refinement)
     elif runner is not None:
-        pose = LNetPoseSource(runner)
+        pose = LNetPoseSource(runner, policy.search_arena)
     else:
         raise ValueError("the lnet pose source needs the trained L-Net (runner)")
     return Controller(pose, policy, Actuator(params.actuator), params.safety)

@@ -7,18 +7,16 @@ else in ``mor.robot``, so that when those modules move, this file alone changes.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 
 from mor.errors import ConfigError
-from mor.eval.methods import METHODS, TrainedPolicies, method_spec
+from mor.eval.methods import METHODS, LoadedMethod, TrainedPolicies, load_method, method_spec
 from mor.eval.protocol import decider, method_inputs, play_records
-from mor.lnet.runtime import LNetRunner, load_lnet
+from mor.lnet.runtime import LNetRunner
 from mor.policy.belief import PoseBelief
 from mor.policy.hierarchy import SkillPolicy, Slot
 from mor.policy.lnet_tracking import LNetBatchTracker
-from mor.policy.observations import GroundTruthBatchTracker
 from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
 
@@ -42,36 +40,25 @@ def uses_lnet(method: str) -> bool:
 
 
 def truth_belief(agent_pose: np.ndarray, object_positions: np.ndarray) -> PoseBelief:
-    """A belief of one robot with zero uncertainty (what gt_pose sees): agent_pose (3,), object_positions (n, 2)."""
+    """A belief of one robot with zero uncertainty (what the ground truth's variant sees): agent_pose (3,), object_positions (n, 2)."""
     return PoseBelief.from_truth(agent_pose[None], object_positions[None])
 
 
-def _policies(method: str, root: Path, sim: SimConfig, lnet_version: str | None,
-              deterministic: bool) -> TrainedPolicies:
-    spec = method_spec(robot_method(method))
-    return TrainedPolicies.load(root, spec.variant, sim.n_objects, sim.arena, lnet_version,
-                                with_decision=spec.decision == "learned", deterministic=deterministic)
-
-
-def evaluation_success(method: str, root: Path, sim: SimConfig, keys: list[tuple[int, int]], deterministic: bool,
-                       n_envs: int, horizon: int | None) -> dict[tuple[int, int], float]:
-    """The evaluation's own play (``mor.eval.protocol.play_records``, the simulator's truth) of ``method``, a method
-    without the L-Net, on the Rearrange episodes ``keys`` ((seed, episode) pairs): each one's success."""
-    if uses_lnet(method):
-        raise ValueError(f"{method}: plays through the L-Net; its evaluation is the committed row")
-    spec = method_spec(method)
-    records = play_records(spec, sim, [("rearrange", seed, episode) for seed, episode in keys],
-                           _policies(method, root, sim, None, deterministic), lambda n: GroundTruthBatchTracker(),
-                           n_envs, horizon)
+def evaluation_success(loaded: LoadedMethod, sim: SimConfig, keys: list[tuple[int, int]], n_envs: int,
+                       horizon: int | None) -> dict[tuple[int, int], float]:
+    """The evaluation's own play (``mor.eval.protocol.play_records``) of a ``loaded`` method on the Rearrange episodes
+    ``keys`` ((seed, episode) pairs): each one's success."""
+    records = play_records(loaded, sim, [("rearrange", seed, episode) for seed, episode in keys], n_envs, horizon)
     return {(r["seed"], r["episode"]): float(r["metrics"]["success"]) for r in records}
 
 
 class LNetTracker:
     """The L-Net's streaming step for one robot: ``observe(image (S, S, 3) uint8, object_classes (n,), held (env
-    convention: n for none), previous action (-1 at the start), starting) -> PoseBelief`` (N = 1)."""
+    convention: n for none), previous action (-1 at the start), starting) -> PoseBelief`` (N = 1). arena: keep the
+    search belief's looks too (for a policy that reads them, ``HierarchyPolicy.search_arena``)."""
 
-    def __init__(self, runner: LNetRunner) -> None:
-        self._tracker = LNetBatchTracker(runner, 1)
+    def __init__(self, runner: LNetRunner, arena: Arena | None = None) -> None:
+        self._tracker = LNetBatchTracker(runner, 1, arena)
 
     def observe(self, image: np.ndarray, object_classes: np.ndarray, held: int, previous_action: int,
                 starting: bool) -> PoseBelief:
@@ -91,18 +78,18 @@ class HierarchyPolicy:
     def __init__(self, method: str, policies: TrainedPolicies, arena: Arena, n_objects: int) -> None:
         spec = method_spec(method)
         self.method, self.n_objects = method, n_objects
+        #: the arena whose search looks the pose source must keep, where the policy reads the search belief
+        self.search_arena = arena if spec.variant.search else None
         self._policy = SkillPolicy({"pick": policies.pick, "drop": policies.drop}, method_inputs(spec), "decision",
                                    arena)
         self._decide = decider(spec, policies, arena)
         self._slot = Slot(None)
 
     @classmethod
-    def load(cls, method: str, root: Path, sim: SimConfig, lnet_version: str | None,
-             deterministic: bool) -> HierarchyPolicy:
-        """``method``'s committed policies under ``root`` (``cards/policy``), checked against what they were trained
-        on (``lnet_version``: the identity of the L-Net a variant observes through, None for gt_pose)."""
-        policies = _policies(method, root, sim, lnet_version, deterministic)
-        return cls(method, policies, Arena.build(sim.arena, sim.arena_size), sim.n_objects)
+    def of(cls, loaded: LoadedMethod, sim: SimConfig) -> HierarchyPolicy:
+        """A ``loaded`` method's committed policies (``mor.eval.methods.load_method``) in ``sim``'s world."""
+        return cls(robot_method(loaded.method.name), loaded.policies, Arena.build(sim.arena, sim.arena_size),
+                   sim.n_objects)
 
     def start(self, seed: int) -> None:
         """A new episode: no skill running; the skills' draws from a generator seeded by ``seed`` (as in
@@ -133,5 +120,5 @@ class HierarchyPolicy:
         return self._slot.chain.task or "decision"
 
 
-__all__ = ["ROBOT_METHODS", "HierarchyPolicy", "LNetRunner", "LNetTracker", "PoseBelief", "evaluation_success",
-           "load_lnet", "robot_method", "truth_belief", "uses_lnet"]
+__all__ = ["ROBOT_METHODS", "HierarchyPolicy", "LNetRunner", "LNetTracker", "LoadedMethod", "PoseBelief",
+           "evaluation_success", "load_method", "robot_method", "truth_belief", "uses_lnet"]

@@ -1,7 +1,7 @@
 """Pose sources: what the controller knows of the world at a frame, as the policies' ``PoseBelief``.
 
-``aruco``: the top camera's tags (``mor.robot.aruco``): the detected pose with zero covariance, as gt_pose sees
-the truth; an object keeps its last detected position while its tag is out of view (objects move only when
+``aruco``: the top camera's tags (``mor.robot.aruco``): the detected pose with zero covariance, as the ground
+truth's variant sees the truth; an object keeps its last detected position while its tag is out of view (objects move only when
 held), the held one is at the robot. ``lnet``: the first-person frames through the L-Net's streaming step.
 A reading without a belief (``problem`` says why) must not be acted on.
 """
@@ -19,6 +19,7 @@ from mor.data.schema import NO_ACTION
 from mor.errors import ConfigError
 from mor.robot.aruco import ArenaLocalizer, TagDetections, TagDetector
 from mor.robot.policy import LNetRunner, LNetTracker, PoseBelief, truth_belief
+from mor.sim.arena import Arena
 from mor.sim.tags import ArucoTags, TopCamera
 
 logger = logging.getLogger(__name__)
@@ -119,9 +120,9 @@ class LNetPoseSource:
 
     camera = "first_person"
 
-    def __init__(self, runner: LNetRunner) -> None:
+    def __init__(self, runner: LNetRunner, search_arena: Arena | None = None) -> None:
         self.runner = runner
-        self.tracker = LNetTracker(runner)
+        self.tracker = LNetTracker(runner, search_arena)
         self._classes = np.zeros(0, np.int64)
         self._starting = True
 

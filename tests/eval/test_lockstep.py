@@ -8,9 +8,10 @@ import torch
 from sb3_contrib import MaskablePPO
 
 from mor.eval.lockstep import play_lockstep
+from mor.eval.failures import ENDINGS
 from mor.eval.methods import METHODS, TrainedPolicies
 from mor.eval.protocol import decider
-from mor.lnet.calibration import Calibration
+from mor.lnet.calibration_file import FittedCalibration
 from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig
 from mor.lnet.runtime import LNetRunner
@@ -105,11 +106,13 @@ def test_lockstep_equals_one_episode_at_a_time(task: str, method: str, determini
 
 def test_lockstep_with_the_lnet_equals_one_tracker_per_episode(quick: TrainedPolicies) -> None:
     torch.manual_seed(0)
-    runner = LNetRunner(LNet(LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)), Calibration(), 16, "test")
+    runner = LNetRunner(LNet(LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)), FittedCalibration(), 16,
+                        "test")
     keys = [(("rearrange", 0, e), 200 + e) for e in range(3)]
     played = dict(play_lockstep("rearrange", keys, SIM, LNetBatchTracker(runner, 2),
                                 {"pick": quick.pick, "drop": quick.drop}, decider(METHODS["lnet_nearest_rule"], quick, ARENA),
                                 pose_inputs(True), n_envs=2, horizon=HORIZON))
     for key, seed in keys:
         alone = _one_at_a_time("rearrange", seed, LNetTracker(runner), quick, "lnet_nearest_rule")
-        assert played[key] == {**alone, "return": played[key]["return"]}, key
+        assert played[key] == {**alone, "return": played[key]["return"], "ending": played[key]["ending"]}, key
+        assert played[key]["ending"] in ENDINGS["rearrange"]

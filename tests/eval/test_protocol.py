@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mor.errors import ConfigError
-from mor.eval.methods import method_spec
+from mor.eval.methods import LoadedMethod, method_spec
 from mor.eval.protocol import metric_summaries, read_records, run_protocol
 from mor.eval.results import merge_rows
 from mor.eval.stats import summarize
@@ -34,20 +34,32 @@ def test_an_unknown_method_lists_the_known_ones() -> None:
         method_spec("foo")
 
 
+class _Stamped(LoadedMethod):
+    """The oracle, as if played through the L-Net ``version`` (what ``played_by`` records)."""
+
+    def played_by(self) -> dict:
+        return {"lnet_version": self.version}
+
+
+def _stamped(version: str) -> LoadedMethod:
+    loaded = _Stamped(method_spec("oracle"))
+    loaded.version = version
+    return loaded
+
+
 def test_every_method_plays_the_same_episodes_and_a_rerun_resumes(tmp_path) -> None:
-    oracle = run_protocol(method_spec("oracle"), SIM, [0, 1], 2, tmp_path / "oracle.jsonl", progress=False)
-    random = run_protocol(method_spec("random"), SIM, [0, 1], 2, tmp_path / "random.jsonl", progress=False)
+    oracle = run_protocol(LoadedMethod(method_spec("oracle")), SIM, [0, 1], 2, tmp_path / "oracle.jsonl", progress=False)
+    random = run_protocol(LoadedMethod(method_spec("random")), SIM, [0, 1], 2, tmp_path / "random.jsonl", progress=False)
     assert [(r["task"], r["reset_seed"]) for r in oracle] == [(r["task"], r["reset_seed"]) for r in random]
     assert len(oracle) == 3 * 2 * 2
     lines = (tmp_path / "oracle.jsonl").read_text().splitlines()
     (tmp_path / "oracle.jsonl").write_text("\n".join(lines[:-1]) + "\n" + lines[-1][:10])  # a kill mid-line
-    again = run_protocol(method_spec("oracle"), SIM, [0, 1], 2, tmp_path / "oracle.jsonl", progress=False)
+    again = run_protocol(LoadedMethod(method_spec("oracle")), SIM, [0, 1], 2, tmp_path / "oracle.jsonl", progress=False)
     assert [r["metrics"] for r in again] == [r["metrics"] for r in oracle]
     assert len(read_records(tmp_path / "oracle.jsonl")) == len(oracle)
     with pytest.raises(ConfigError, match=r"oracle.jsonl: its records were played by \{\} but this run plays "
                                           r"\{'lnet_version': 'b'\}; remove it and oracle.played_by.json"):
-        run_protocol(method_spec("oracle"), SIM, [0, 1], 2, tmp_path / "oracle.jsonl", progress=False,
-                     played_by={"lnet_version": "b"})  # e.g. a new L-Net: the old records are not resumed
+        run_protocol(_stamped("b"), SIM, [0, 1], 2, tmp_path / "oracle.jsonl", progress=False)  # e.g. a new L-Net
     summaries = metric_summaries(oracle, resamples=200)
     assert set(summaries) == {"pick_success", "drop_success", "rearrange_success", "fixed_strict", "energy_remaining"}
     assert summaries["pick_success"]["mean"] == 1.0
@@ -71,11 +83,11 @@ def _edit(line: str, change: dict) -> str:
 def test_a_line_that_is_not_a_sealed_record_is_one_line_naming_file_and_line(tmp_path: Path, replace, problem
                                                                               ) -> None:
     path = tmp_path / "oracle.jsonl"
-    run_protocol(method_spec("oracle"), SIM, [0], 1, path, progress=False, played_by={"lnet_version": "a"})
+    run_protocol(_stamped("a"), SIM, [0], 1, path, progress=False)
     lines = path.read_text().splitlines()
     path.write_text("\n".join([replace(lines[0]), *lines[1:]]) + "\n")
     with pytest.raises(ConfigError) as error:
-        run_protocol(method_spec("oracle"), SIM, [0], 1, path, progress=False, played_by={"lnet_version": "a"})
+        run_protocol(_stamped("a"), SIM, [0], 1, path, progress=False)
     message = str(error.value)
     assert "\n" not in message and message.startswith(f"{path}:1: {problem}"), message
     assert message.endswith("delete that line to play its episode again, or delete the file and "
@@ -84,7 +96,7 @@ def test_a_line_that_is_not_a_sealed_record_is_one_line_naming_file_and_line(tmp
 
 def test_records_are_sealed_with_what_played_them(tmp_path: Path) -> None:
     path = tmp_path / "oracle.jsonl"
-    run_protocol(method_spec("oracle"), SIM, [0], 1, path, progress=False, played_by={"lnet_version": "a"})
+    run_protocol(_stamped("a"), SIM, [0], 1, path, progress=False)
     assert len(read_records(path)) == 3
     (tmp_path / "oracle.played_by.json").write_text(json.dumps({"lnet_version": "b"}))  # a sidecar edited by hand
     with pytest.raises(ConfigError, match=r"oracle.jsonl:1: the record does not match its digest"):
@@ -95,8 +107,8 @@ def test_records_are_sealed_with_what_played_them(tmp_path: Path) -> None:
 
 
 def test_rows_are_replaced_by_key_and_kept_in_order() -> None:
-    old = [{"method": "lnet", "encoder": None, "arena": "rect", "policy_arena": "rect", "n_objects": 3, "v": 1}]
-    new = [{"method": "lnet", "encoder": None, "arena": "rect", "policy_arena": "rect", "n_objects": 3, "v": 2},
-           {"method": "gt_pose", "encoder": None, "arena": "rect", "policy_arena": "rect", "n_objects": 3, "v": 3}]
+    old = [{"method": "lnet", "encoder": None, "arena": "square", "policy_arena": "square", "n_objects": 3, "v": 1}]
+    new = [{"method": "lnet", "encoder": None, "arena": "square", "policy_arena": "square", "n_objects": 3, "v": 2},
+           {"method": "gt_pose", "encoder": None, "arena": "square", "policy_arena": "square", "n_objects": 3, "v": 3}]
     merged = merge_rows(old, new)
     assert [(r["method"], r["v"]) for r in merged] == [("gt_pose", 3), ("lnet", 2)]

@@ -15,7 +15,7 @@ from mor.eval.paper import METRIC_NAMES
 
 def _row(method: str, value: float, **fields: object) -> dict:
     summary = {"mean": value, "std": 0.01, "ci95": [value - 0.02, value + 0.02]}
-    return {"method": method, "encoder": None, "arena": "rect", "policy_arena": "rect", "n_objects": 3,
+    return {"method": method, "encoder": None, "arena": "square", "policy_arena": "square", "n_objects": 3,
             "seeds": [0, 1], "episodes_per_seed": 4, "metrics": {name: summary for name in METRIC_NAMES}, **fields}
 
 

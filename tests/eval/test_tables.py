@@ -11,7 +11,7 @@ from mor.eval.tables import TABLES, require_complete, table_markdown
 
 def _row(method: str, value: float) -> dict:
     summary = {"mean": value, "std": 0.01, "ci95": [value - 0.02, value + 0.02]}
-    return {"method": method, "encoder": None, "arena": "rect", "policy_arena": "rect", "n_objects": 3,
+    return {"method": method, "encoder": None, "arena": "square", "policy_arena": "square", "n_objects": 3,
             "seeds": [0, 1], "episodes_per_seed": 2, "train_steps": {"pick": 10},
             "metrics": {name: summary for name in METRIC_NAMES}}
 
@@ -45,15 +45,18 @@ def test_a_stale_row_is_marked_with_the_command_that_re_runs_it() -> None:
 
 
 def test_the_policy_card_compares_with_and_without_uncertainty_by_their_intervals() -> None:
-    from mor.eval.policy_card import uncertainty_comparison
+    from mor.eval.policy_card import ablation_pair, uncertainty_comparison
 
-    lines = uncertainty_comparison([_row("lnet", 0.5), _row("lnet_no_uncertainty", 0.3), _row("gt_pose", 0.9)])
+    pair = ablation_pair("lnet")
+    assert pair == ablation_pair("lnet_no_uncertainty") == ("lnet", "lnet_no_uncertainty")
+    assert ablation_pair("gt_pose") is None
+    lines = uncertainty_comparison([_row("lnet", 0.5), _row("lnet_no_uncertainty", 0.3), _row("gt_pose", 0.9)], pair)
     assert len(lines) == len(METRIC_NAMES)
     assert lines[0].endswith("| lnet higher |")
     assert lines[-1].endswith("| lnet higher (worse) |")  # %E: lower is better
-    close = uncertainty_comparison([_row("lnet", 0.5), _row("lnet_no_uncertainty", 0.49)])
+    close = uncertainty_comparison([_row("lnet", 0.5), _row("lnet_no_uncertainty", 0.49)], pair)
     assert all(line.endswith("| no difference shown |") for line in close)
-    assert uncertainty_comparison([_row("lnet", 0.5)]) == []
+    assert uncertainty_comparison([_row("lnet", 0.5)], pair) == []
 
 
 def test_each_row_short_of_the_paper_is_named_with_its_learning_curves_and_its_lnet_error() -> None:
@@ -69,7 +72,7 @@ def test_each_row_short_of_the_paper_is_named_with_its_learning_curves_and_its_l
                 "encoder": "nature_cnn", "workspace": "settings/polygon", "train_steps": {"pick": 5, "drop": 5}}
     lines = shortfalls(TABLES[3], [zero_shot, fine_tuned, baseline], localisation)
     assert len(lines) == 2  # the baseline is better than the paper's on every metric: not listed
-    assert lines[0].startswith("- Table 3, Ours (lnet), policies trained in rect: zero-shot: Pick 0.200 (paper 0.538)")
+    assert lines[0].startswith("- Table 3, Ours (lnet), policies trained in the square arena: zero-shot: Pick 0.200 (paper 0.538)")
     assert "[pick](../../cards/policy/lnet/pick/learning_curve.png)" in lines[0]  # played the main workspace's
     assert "[pick](../../settings/polygon/cards/policy/lnet/pick/learning_curve.png)" in lines[1]
     assert "decision" not in lines[1]  # not trained: no learning curve
@@ -80,8 +83,11 @@ def test_each_row_short_of_the_paper_is_named_with_its_learning_curves_and_its_l
 def test_a_baseline_plays_the_img_baselines_pick_and_its_own_drop() -> None:
     from mor.eval.methods import METHODS
 
-    assert METHODS["baseline_landmark"].skill_owners() == {"pick": "baseline_img", "drop": "baseline_landmark"}
-    assert METHODS["lnet_nearest_rule"].skill_owners() == {"pick": "lnet", "drop": "lnet"}
+    def names(owners: dict) -> dict:
+        return {task: variant.name for task, variant in owners.items()}
+
+    assert names(METHODS["baseline_landmark"].skill_owners()) == {"pick": "baseline_img", "drop": "baseline_landmark"}
+    assert names(METHODS["lnet_nearest_rule"].skill_owners()) == {"pick": "lnet", "drop": "lnet"}
     assert set(METHODS["lnet"].skill_owners()) == {"pick", "drop", "decision"} and METHODS["oracle"].skill_owners() == {}
     assert METHODS["lnet_no_uncertainty"].uses_lnet and not METHODS["gt_pose"].uses_lnet
 

@@ -12,10 +12,10 @@ from mor.eval.lockstep import play_lockstep
 from mor.eval.methods import METHODS
 from mor.eval.protocol import decider, method_inputs, sim_of
 from mor.eval.video import write_policy_video
-from mor.policy.baselines import BASELINE_INPUTS, BaselineExtractor, BaselineObservation
+from mor.policy.baselines import BaselineExtractor, BaselineObservation
 from mor.policy.envs import make_task_env
 from mor.policy.hierarchy import Skill
-from mor.policy.names import BASELINE_VARIANTS
+from mor.policy.variants import VARIANTS
 from mor.policy.observations import RenderingTruthTracker
 from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
@@ -26,7 +26,7 @@ HORIZON = 12
 
 def _skill(task: str, variant: str, sim: SimConfig) -> Skill:
     """An untrained (random-weight) baseline skill: deterministic, so the video and the evaluation must agree."""
-    env = BaselineObservation(make_task_env(task, sim, render_frames=True), BASELINE_INPUTS[variant])
+    env = BaselineObservation(make_task_env(task, sim, render_frames=True), VARIANTS[variant].baseline_input)
     extractor = {"encoder": "compact", "image_features": 8}
     model = MaskablePPO("MultiInputPolicy", env, seed=0, device="cpu",
                         policy_kwargs={"features_extractor_class": BaselineExtractor,
@@ -34,7 +34,7 @@ def _skill(task: str, variant: str, sim: SimConfig) -> Skill:
     return Skill(model)
 
 
-@pytest.mark.parametrize("variant", BASELINE_VARIANTS)
+@pytest.mark.parametrize("variant", [name for name, v in VARIANTS.items() if v.is_baseline])
 def test_a_baselines_video_plays_the_episode_its_evaluation_plays(variant: str, tmp_path: Path) -> None:
     method = METHODS[variant]
     sim = sim_of(method, SIM)

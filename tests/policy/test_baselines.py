@@ -9,14 +9,16 @@ from stable_baselines3.common.preprocessing import preprocess_obs
 
 from mor.eval.methods import METHODS
 from mor.eval.protocol import decider, sim_of
-from mor.policy.baselines import BASELINE_INPUTS, BaselineExtractor, BaselineObservation, baseline_inputs
+from mor.policy.baselines import BaselineExtractor, BaselineObservation, baseline_inputs
 from mor.policy.envs import make_task_env
-from mor.policy.names import BASELINE_VARIANTS, baseline_tasks
 from mor.policy.signature import PolicySignature
+from mor.policy.variants import VARIANTS
 from mor.sim.config import SimConfig
 from mor.sim.geometry import bearing
 
 SIM = SimConfig(n_objects=3, image_size=32)
+
+BASELINES = [v for v in VARIANTS.values() if v.is_baseline]
 
 
 def test_pick_sees_the_frame_and_the_target_class_only() -> None:
@@ -69,14 +71,14 @@ def test_the_extractor_concatenates_image_features_and_the_one_hot_goal(encoder:
 
 
 def test_only_baseline_img_trains_a_pick_and_the_signature_names_the_inputs() -> None:
-    assert [baseline_tasks(v) for v in BASELINE_VARIANTS] == [("pick", "drop"), ("drop",), ("drop",)]
-    signature = PolicySignature.of_baseline("drop", "baseline_delta_pose", 3, "square", 64)
+    assert [v.trains for v in BASELINES] == [("pick", "drop"), ("drop",), ("drop",)]
+    signature = PolicySignature.of_baseline("drop", VARIANTS["baseline_delta_pose"], 3, "square", 64)
     assert signature.observation == ["delta_pose[3]", "goal_class[24]", "goal_position[2]", "image[3, 64, 64]"]
 
 
 def test_the_evaluation_encoding_equals_the_training_wrapper() -> None:
-    for variant in BASELINE_VARIANTS:
-        env = BaselineObservation(make_task_env("drop", SIM, render_frames=True), BASELINE_INPUTS[variant])
+    for variant in BASELINES:
+        env = BaselineObservation(make_task_env("drop", SIM, render_frames=True), variant.baseline_input)
         wrapped, _ = env.reset(seed=1)
         raw = env.unwrapped._observation()
         info = env._info

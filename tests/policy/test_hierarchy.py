@@ -19,6 +19,7 @@ from mor.policy.train import train_policy
 from mor.sim.config import SimConfig
 from mor.sim.oracle import Oracle
 from mor.sim.rules import Action, WorldState
+from mor.policy.variants import VARIANTS
 
 SIM = SimConfig(n_objects=2, image_size=16)
 TINY_PPO = PPOParams(steps=64, n_envs=2, n_steps=16, batch_size=16, n_epochs=1, hidden=[8, 8], checkpoint_every=32)
@@ -81,8 +82,8 @@ def test_the_nearest_rule_with_oracle_skills_solves_the_task() -> None:
 
 
 def test_training_writes_its_outputs_and_resumes_from_the_checkpoint(tmp_path: Path) -> None:
-    signature = PolicySignature.of("pick", "gt_pose", 2, "square", None)
-    make = lambda params: lambda: make_training_env("pick", "gt_pose", SIM, params)  # noqa: E731
+    signature = PolicySignature.of("pick", VARIANTS["gt_pose"], 2, "square", None)
+    make = lambda params: lambda: make_training_env("pick", VARIANTS["gt_pose"], SIM, params)  # noqa: E731
     first = train_policy(make(TINY_PPO), TINY_PPO, signature, tmp_path, 0, "pick", progress=False)
     assert first["steps"] == 64
     for name in ("checkpoint.pt", "policy.pth", "meta.json", "log.csv", "learning_curve.png", "summary.json"):
@@ -93,33 +94,36 @@ def test_training_writes_its_outputs_and_resumes_from_the_checkpoint(tmp_path: P
     with (tmp_path / "log.csv").open() as handle:
         steps = [int(row["steps"]) for row in csv.DictReader(handle)]
     assert steps == sorted(steps) and steps[-1] == 128 and steps[0] < 64  # appended, not restarted
-    other = PolicySignature.of("pick", "gt_pose", 2, "polygon", None)  # e.g. another world or another L-Net
+    other = PolicySignature.of("pick", VARIANTS["gt_pose"], 2, "polygon", None)  # e.g. another world or another L-Net
     with pytest.raises(ConfigError, match=r"checkpoint.pt: not resumed.*arena='square' but this run needs 'polygon'"):
         train_policy(make(longer), longer, other, tmp_path, 0, "pick", progress=False)
 
 
 def test_a_policy_of_another_layout_is_one_clear_error(tmp_path: Path) -> None:
-    write_signature(tmp_path / "meta.json", PolicySignature.of("pick", "gt_pose", 3, "square", None))
+    write_signature(tmp_path / "meta.json", PolicySignature.of("pick", VARIANTS["gt_pose"], 3, "square", None))
     with pytest.raises(ConfigError, match=r"n_objects=3 but this run needs 2"):
-        check_signature(tmp_path / "meta.json", PolicySignature.of("pick", "gt_pose", 2, "square", None))
-    write_signature(tmp_path / "meta.json", PolicySignature.of("pick", "lnet", 2, "square", "abc"))
+        check_signature(tmp_path / "meta.json", PolicySignature.of("pick", VARIANTS["gt_pose"], 2, "square", None))
+    write_signature(tmp_path / "meta.json", PolicySignature.of("pick", VARIANTS["lnet"], 2, "square", "abc"))
     with pytest.raises(ConfigError, match=r"lnet_version='abc' but this run needs 'def'"):
-        check_signature(tmp_path / "meta.json", PolicySignature.of("pick", "lnet", 2, "square", "def"))
+        check_signature(tmp_path / "meta.json", PolicySignature.of("pick", VARIANTS["lnet"], 2, "square", "def"))
     assert json.loads((tmp_path / "meta.json").read_text())["variant"] == "lnet"
 
 
 def test_the_policy_benchmark_measures_every_path_in_one_run() -> None:
     import torch
 
-    from mor.lnet.calibration import Calibration
+    from mor.lnet.calibration_file import FittedCalibration
     from mor.lnet.model import LNet
     from mor.lnet.params import LNetConfig
     from mor.lnet.runtime import LNetRunner
     from mor.policy.bench import bench_policy
 
     torch.manual_seed(0)
-    runner = LNetRunner(LNet(LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)), Calibration(), 16, "test")
+    runner = LNetRunner(LNet(LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)), FittedCalibration(), 16,
+                        "test")
     result = bench_policy(SIM, TINY_PPO, runner, seconds=0.2, repeats=1, progress=False)
     assert set(result["steps_per_second"]) == {f"{kind}_{name}" for kind in ("env", "ppo")
-                                               for name in ("gt_pose", "lnet", "lnet_subproc")}
+                                               for name in ("gt_pose", "gt_pose_per_env", "lnet", "lnet_subproc")
+                                               } | {"env_gt_pose_n64"}
+    assert set(result["batched_over_per_env"]) == {"env", "ppo"}
     assert all(rate > 0 for rate in result["steps_per_second"].values())

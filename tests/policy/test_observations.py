@@ -13,16 +13,17 @@ from gymnasium.utils.env_checker import check_env as gymnasium_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from mor.lnet.calibration import Calibration
+from mor.lnet.calibration_file import FittedCalibration
 from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig
 from mor.lnet.runtime import LNetRunner
 from mor.errors import ConfigError
-from mor.policy.baselines import BASELINE_INPUTS, BaselineObservation
+from mor.policy.baselines import BaselineObservation
 from mor.policy.belief import PoseBelief
-from mor.policy.envs import baseline_sim, make_policy_env, make_task_env
+from mor.policy.envs import make_policy_env, make_task_env, variant_sim
 from mor.policy.features import feature_names, observation_vector
-from mor.policy.names import BASELINE_VARIANTS, TASKS
+from mor.policy.names import TASKS
+from mor.policy.variants import VARIANTS
 from mor.policy.lnet_tracking import LNetTracker, LNetVecObservation
 from mor.policy.observations import GroundTruthTracker
 from mor.sim.arena import Arena
@@ -79,7 +80,8 @@ def test_ground_truth_observations_render_nothing_and_carry_zero_uncertainty() -
 
 def _runner() -> LNetRunner:
     torch.manual_seed(0)
-    return LNetRunner(LNet(LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)), Calibration(), 16, "test")
+    return LNetRunner(LNet(LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)), FittedCalibration(), 16,
+                        "test")
 
 
 def test_the_batched_lnet_wrapper_equals_one_tracker_per_env_across_episode_ends() -> None:
@@ -122,10 +124,12 @@ def test_clearance_is_the_free_distance_to_walls_and_floor_objects_but_not_the_h
     assert near_wall[ahead] == pytest.approx(0.5 - AGENT_RADIUS)
 
 
-def test_a_task_that_is_not_a_policys_names_the_policy_tasks() -> None:
-    with pytest.raises(ConfigError, match=r"^task: 'rearrange' is not a policy's task; choose one of pick, drop, "
-                                          r"decision \(decision plays the full rearrangement\)$"):
+def test_a_task_that_is_not_a_policys_names_the_policies_and_a_policy_is_not_a_world_task() -> None:
+    with pytest.raises(ConfigError, match=r"^task: 'rearrange' is not a policy; choose one of pick, drop, decision$"):
         make_policy_env("rearrange", SIM, GroundTruthTracker(), uncertainty=True)
+    with pytest.raises(ConfigError, match=r"^task: 'decision' is not one of the world's tasks; choose one of pick, "
+                                          r"drop, rearrange$"):
+        make_task_env("decision", SIM, render_frames=False)
 
 
 class _EndingSkill:
@@ -151,10 +155,10 @@ def _policy_envs() -> dict[str, Callable[[], gym.Env]]:
         if uncertainty:
             envs[f"{variant}-decision"] = lambda m=tracker: make_policy_env(
                 "decision", SIM, m(), True, (_EndingSkill(Action.PICK), _EndingSkill(Action.DROP)))
-    for variant in BASELINE_VARIANTS:
+    for variant in (v for v in VARIANTS.values() if v.is_baseline):
         for task in ("pick", "drop"):
-            envs[f"{variant}-{task}"] = lambda t=task, v=variant: BaselineObservation(
-                make_task_env(t, baseline_sim(v, SIM), render_frames=True), BASELINE_INPUTS[v])
+            envs[f"{variant.name}-{task}"] = lambda t=task, v=variant: BaselineObservation(
+                make_task_env(t, variant_sim(v, SIM), render_frames=True), v.baseline_input)
     return envs
 
 

@@ -9,10 +9,12 @@ from pathlib import Path
 import pytest
 
 from mor.config import Profile, load_profile
-from mor.robot.policy import HierarchyPolicy
+from mor.eval.methods import method_spec
+from mor.robot.policy import HierarchyPolicy, load_method
 from mor.robot.pose import Frame, RobotTask
 from mor.robot.sim_robot import SimRobot
 from mor.sim.rollout import episode_seed
+from pipelines.workspaces import workspace_record
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -24,8 +26,8 @@ def profile() -> Profile:
 
 @pytest.fixture(scope="session")
 def gt_policy(profile: Profile) -> HierarchyPolicy:
-    return HierarchyPolicy.load("gt_pose", REPO_ROOT / "cards/policy", profile.sim, None,
-                                profile.policy.skills_deterministic)
+    return HierarchyPolicy.of(load_method(method_spec("gt_pose"), workspace_record(REPO_ROOT, profile), profile),
+                              profile.sim)
 
 
 @pytest.fixture

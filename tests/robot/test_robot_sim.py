@@ -17,7 +17,7 @@ from mor.robot.actuator import Actuator
 from mor.robot.bench import time_controller
 from mor.robot.controller import Controller
 from mor.robot.evaluate import make_controller
-from mor.robot.policy import HierarchyPolicy, load_lnet, truth_belief
+from mor.robot.policy import HierarchyPolicy, load_method, truth_belief
 from mor.robot.pose import Frame, PoseReading, RobotTask
 from mor.robot.recording import METADATA, RunInfo, RunRecorder
 from mor.robot.replay import replay_bag
@@ -25,7 +25,7 @@ from mor.robot.sim_robot import SimRobot, run_sim_episode
 from mor.robot.video import write_run_video
 from mor.sim.tasks import RearrangeEnv
 from pipelines.shapes import profile_shape
-from pipelines.evaluate import load_method
+from pipelines.workspaces import workspace_record
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 HORIZON = 6  # the sim_robot fixture's
@@ -46,9 +46,9 @@ class TruthSource:
 def test_the_controller_plays_the_hierarchy_as_the_evaluation_does(profile: Profile, gt_policy: HierarchyPolicy,
                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(REPO_ROOT)
-    policies, trackers, _ = load_method(profile, method_spec("gt_pose"))
+    loaded = load_method(method_spec("gt_pose"), workspace_record(REPO_ROOT, profile), profile)
     keys = [("rearrange", 0, episode) for episode in range(2)]
-    evaluated = list(play_records(method_spec("gt_pose"), profile.sim, keys, policies, trackers, 2, horizon=40))
+    evaluated = list(play_records(loaded, profile.sim, keys, 2, horizon=40))
     robot = SimRobot(profile.sim, profile.robot.tags, profile.robot.top_camera, top_down=False, horizon=40)
     controller = Controller(TruthSource(), gt_policy, Actuator(profile.robot.actuator), profile.robot.safety)
     try:
@@ -105,11 +105,8 @@ def test_a_run_is_recorded_replayed_imported_and_taken_in_by_the_build(
 
 
 def test_the_first_person_loop_runs_through_the_lnet(profile: Profile, sim_robot: SimRobot) -> None:
-    runner = load_lnet(REPO_ROOT / "cards/lnet/model.pt", data_association=profile.lnet.data_association,
-                       encoder_precision=profile.lnet.encoder_precision)
-    policy = HierarchyPolicy.load("lnet", REPO_ROOT / "cards/policy", profile.sim, runner.identity,
-                                  profile.policy.skills_deterministic)
-    controller = make_controller(profile.robot, "lnet", policy, runner)
+    loaded = load_method(method_spec("lnet"), workspace_record(REPO_ROOT, profile), profile)
+    controller = make_controller(profile.robot, "lnet", HierarchyPolicy.of(loaded, profile.sim), loaded.lnet)
     played = run_sim_episode(sim_robot, controller, 5)
     assert played.steps == HORIZON and len(played.position_errors) == HORIZON
     assert np.isfinite(played.position_errors).all()

@@ -1,0 +1,66 @@
+"""Rows over training runs: the stratified bootstrap, the aggregation of per-run rows, and the comparisons."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mor.errors import ConfigError
+from mor.eval.results import aggregate_runs, comparisons
+from mor.eval.stats import probability_of_improvement, summarize_runs
+
+METRICS = ("pick_success", "drop_success", "rearrange_success", "fixed_strict", "energy_remaining")
+
+
+def _outcomes(p: float, seed: int, energy: float = 0.3) -> dict:
+    rng = np.random.default_rng(seed)
+    values = {m: {str(s): (rng.random(40) < p).astype(float).tolist() for s in range(2)} for m in METRICS}
+    values["energy_remaining"] = {str(s): [energy] * 40 for s in range(2)}
+    return values
+
+
+def _row(method: str, training_seed: int, p: float, version: str | None = None, energy: float = 0.3) -> dict:
+    return {"method": method, "encoder": None, "arena": "square", "policy_arena": "square", "n_objects": 3,
+            "seeds": [0, 1], "episodes_per_seed": 40, "training_seed": training_seed, "workspace": ".",
+            "metrics": {m: {"mean": p} for m in METRICS}, "outcomes": _outcomes(p, training_seed, energy),
+            "played_by": {"policies": {}, "lnet_version": version}}
+
+
+def test_the_interval_spans_the_runs_and_one_run_has_no_spread() -> None:
+    runs = [{"0": [1.0] * 50, "1": [0.0] * 50}, {"0": [1.0] * 100}, {"0": [0.0] * 100}]
+    summary, distribution = summarize_runs(runs, resamples=2000)
+    assert summary["run_means"] == [0.5, 1.0, 0.0] and summary["mean"] == pytest.approx(0.5)
+    assert summary["std"] == pytest.approx(0.5) and distribution.shape == (2000,)
+    assert summary["ci95"][0] < 0.2 and summary["ci95"][1] > 0.8  # the runs disagree: a wide interval
+    alone, _ = summarize_runs([{"0": [1.0, 0.0] * 50}], resamples=2000)
+    assert alone["std"] == 0.0 and alone["ci95"][0] < 0.5 < alone["ci95"][1]
+
+
+def test_probability_of_improvement_counts_ties_half() -> None:
+    assert probability_of_improvement([[1.0, 1.0]], [[0.0, 0.0]]) == 1.0
+    assert probability_of_improvement([[0.0, 1.0]], [[0.0, 1.0]]) == 0.5
+    assert probability_of_improvement([[0.0]], [[1.0], [0.0]]) == 0.25
+
+
+def test_runs_of_one_method_become_one_row_and_other_lnets_are_refused() -> None:
+    rows = aggregate_runs([_row("lnet", 0, 0.5, "v1"), _row("lnet", 1, 0.7, "v1"), _row("gt_pose", 0, 0.9)], 500)
+    lnet = next(row for row in rows if row["method"] == "lnet")
+    assert lnet["training_seeds"] == [0, 1] and [run["training_seed"] for run in lnet["runs"]] == [0, 1]
+    assert set(lnet["metrics"]["pick_success"]) >= {"mean", "std", "ci95", "iqm"}
+    assert next(row for row in rows if row["method"] == "gt_pose")["training_seeds"] == [0]
+    with pytest.raises(ConfigError, match=r"lnet: training seed 0 played through L-Net v1 but seed 1 through v2"):
+        aggregate_runs([_row("lnet", 0, 0.5, "v1"), _row("lnet", 1, 0.5, "v2")])
+
+
+def test_the_verdict_follows_the_interval_of_the_difference() -> None:
+    better = aggregate_runs([_row("lnet", s, 0.9, energy=0.1) for s in range(3)]
+                            + [_row("lnet_no_uncertainty", s, 0.3, energy=0.5) for s in range(3)], 500)
+    found = {c["metric"]: c for c in comparisons(better, 500)}
+    assert found["rearrange_success"]["verdict"] == "helps" and found["rearrange_success"]["difference"]["mean"] > 0.5
+    assert found["energy_remaining"]["verdict"] == "helps"  # lower is better
+    assert found["rearrange_success"]["probability_of_improvement"] > 0.7
+    same = aggregate_runs([_row("lnet", s, 0.5) for s in range(3)] + [_row("lnet_no_uncertainty", s + 10, 0.5)
+                                                                      for s in range(3)], 500)
+    assert {c["verdict"] for c in comparisons(same, 500) if c["metric"] != "energy_remaining"} == {"no evidence"}
+    worse = aggregate_runs([_row("lnet", 0, 0.1), _row("lnet_no_uncertainty", 0, 0.9)], 500)
+    assert {c["metric"]: c for c in comparisons(worse, 500)}["pick_success"]["verdict"] == "hurts"
