@@ -137,3 +137,27 @@ def test_reset_options_are_refused() -> None:
     with pytest.raises(ConfigError) as error:
         env.reset()
     _one_line(error, "options")
+
+
+def test_training_on_it_gives_the_weights_and_log_of_the_per_env_path(tmp_path) -> None:
+    """The same PPO run (chunks, seeded episode starts, checkpoints) on both paths: the same weights and log."""
+    import torch
+
+    from mor.policy.policy_file import load_policy_file
+    from mor.policy.signature import PolicySignature
+    from mor.policy.train import train_policy
+
+    sim = SimConfig(n_objects=2, image_size=16)
+    runs = {}
+    for vec_env in ("dummy", "batched"):
+        params = PPOParams(steps=192, n_envs=4, n_steps=16, batch_size=32, n_epochs=2, hidden=[16, 16],
+                           checkpoint_every=64, vec_env=vec_env)
+        out = tmp_path / vec_env
+        train_policy(lambda p=params: make_training_env("pick", GROUND_TRUTH, sim, p), params,
+                     PolicySignature.of("pick", GROUND_TRUTH, 2, "square", None), out, 0, vec_env, progress=False)
+        runs[vec_env] = (load_policy_file(out / "policy.pth").state_dict(), (out / "log.csv").read_text())
+    (dummy_weights, dummy_log), (batched_weights, batched_log) = runs["dummy"], runs["batched"]
+    untimed = lambda log: [[v for k, v in zip(log.splitlines()[0].split(","), line.split(","), strict=True)  # noqa: E731
+                            if k not in ("wall_seconds", "steps_per_second")] for line in log.splitlines()]
+    assert untimed(dummy_log) == untimed(batched_log)
+    assert all(torch.equal(dummy_weights[key], batched_weights[key]) for key in dummy_weights)
