@@ -25,11 +25,14 @@ def rejected_files(report: Path | None, out_dir: Path) -> set[str]:
 def run(profile: Profile, out_dir: Path, stats: Path, rejected_from: Path | None, workers: int | None = None,
         backend: str | None = None, episodes: int | None = None) -> dict[str, Any]:
     """Collect the profile's missing episodes into ``out_dir`` (refusing a folder of another profile's episodes);
-    writes the counts and params to ``stats``. One collection into ``out_dir`` at a time (``writer_lock``)."""
+    writes the counts and params to ``stats`` (a run that found every episode there keeps the stats of the run that
+    collected them, whose time ``compute.json`` reports). One collection into ``out_dir`` at a time
+    (``writer_lock``)."""
     params = profile.collect
     shape = profile_shape(profile)
     with writer_lock(out_dir, "mor collect"):
         result = collect(shape.spec, out_dir, episodes or params.episodes, workers or params.workers,
                          backend or params.backend, rejected_files(rejected_from, out_dir), shape=shape)
-        write_json(stats, {**result, "params": shape.spec.params()})
+        if result["collected"] or not stats.is_file():
+            write_json(stats, {**result, "params": shape.spec.params()})
     return result

@@ -152,6 +152,8 @@ def _with(section: str, key: str, value) -> str:
         ("sim", "n_objects", "3", "sim.n_objects"),
         ("lnet", "train", {"max_steps": True}, "lnet.train.max_steps"),
         ("policy", "pick", {"n_envs": False}, "policy.pick.n_envs"),
+        ("policy", "training_seeds", [0, 0], "policy.training_seeds: seeds must be distinct"),
+        ("policy", "training_seeds", [-1], "policy.training_seeds.0"),
         ("oracle", "episode", 4, "oracle.episode"),  # typo of episodes
         ("demo", "task", "fly", "demo.task"),
         ("demo", "fps", 0, "demo.fps"),
@@ -365,3 +367,19 @@ def test_the_active_profile_must_be_named_in_params_yaml(runner: CliRunner, tmp_
     assert result.exit_code == 2
     lines = _error_lines(result)
     assert len(lines) == 1 and str(params) in lines[0] and "profile" in lines[0], lines
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["policy", "train", "--variant", "gt_pose", "--seed", "-1"], "--seed"),
+    (["policy", "train", "--variant", "gt_pose", "--seed", "0,0"], "--seed"),
+    (["policy", "train", "--variant", "gt_pose", "--seed", "1", "--backend", "slurm"], "--backend"),
+    (["eval", "run", "--method", "gt_pose", "--seeds", "0,9"], "--seeds: [0] are the protocol's own"),
+    (["eval", "run", "--method", "gt_pose", "--seeds", "5,5"], "--seeds"),
+])
+def test_bad_training_and_evaluation_seeds_are_one_line(runner: CliRunner, repo_root: Path,
+                                                        monkeypatch: pytest.MonkeyPatch, args, words) -> None:
+    monkeypatch.chdir(repo_root)
+    result = runner.invoke(app, [*args, "--profile", "tiny"])
+    assert result.exit_code == 2, result.output
+    lines = _error_lines(result)
+    assert len(lines) == 1 and lines[0].startswith("error: ") and words in lines[0], lines

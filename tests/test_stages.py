@@ -55,6 +55,7 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
 
     # A second collect changes nothing: everything is already there.
     assert "collected 0 episodes" in _run("collect", "--profile", "tiny")
+    assert json.loads((workspace / "datasets/collect_stats.json").read_text()) == stats  # the collecting run's
 
     _run("train-lnet", "--profile", "tiny")
     assert (workspace / "datasets/lnet/model.pt").is_file()

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -61,6 +63,9 @@ class LNetRunner:
         # compiled: the step runs as torch.compile's fused kernels (the same arithmetic up to float rounding, about
         # 1e-7 here; about a minute to compile on first use, then cached on disk by torch). docs/performance.md.
         self.compiled = compiled
+        if compiled:  # inductor's own notices (no CUDA on a CPU machine, its deprecations) are not the user's
+            logging.getLogger("torch.utils.cpp_extension").setLevel(logging.ERROR)
+            warnings.filterwarnings("ignore", category=FutureWarning, module=r"torch\._inductor")
         self._network = torch.compile(self.model, dynamic=False) if compiled else self.model
         self.fitted = fitted
         self.image_size = image_size
