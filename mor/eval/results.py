@@ -89,7 +89,8 @@ def aggregate_runs(rows: list[dict[str, Any]], resamples: int = 10_000) -> list[
     for group in groups.values():
         group = sorted(group, key=lambda row: row.get("training_seed") or 0)
         if len(group) == 1:
-            aggregated.append({**group[0], "training_seeds": [group[0].get("training_seed") or 0]})
+            trained = method_spec(group[0]["method"]).variant is not None  # the scripted methods train nothing
+            aggregated.append({**group[0], "training_seeds": [group[0].get("training_seed") or 0] if trained else []})
             continue
         aggregated.append(_aggregate(group, resamples))
     return aggregated
