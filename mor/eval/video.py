@@ -16,6 +16,7 @@ from tqdm import tqdm
 from mor.lnet.figures import write_estimate_gif
 from mor.policy.envs import make_task_env
 from mor.policy.features import Encode
+from mor.policy.belief import PoseBelief
 from mor.policy.hierarchy import Decide, Skill, SkillHierarchy
 from mor.policy.observations import BatchTracker
 from mor.sim.catalog import object_class
@@ -39,6 +40,17 @@ def end_reason(info: dict[str, Any], truncated: bool) -> str:
     if truncated:
         return "out of steps (horizon)"
     return "obstructed" if info.get("obstructed") else "ended"
+
+
+def stated_caption(belief: PoseBelief) -> str:
+    """The stated belief beyond the ellipses, as a caption line: each object found by the L-Net or still searched,
+    and its probability of being lost; "" for a belief that states none (the truth's)."""
+    if belief.object_found is None:
+        return ""
+    lost = belief.object_lost[0] if belief.object_lost is not None else np.zeros(belief.n_objects)
+    parts = [f"{k}: {'found' if found else 'searching'}" + (f", lost {p:.2f}" if found and p > 0 else "")
+             for k, (found, p) in enumerate(zip(belief.object_found[0] > 0.5, lost, strict=True))]
+    return "\nL-Net: " + "; ".join(parts)
 
 
 class _Recorder:
@@ -66,7 +78,8 @@ class _Recorder:
         held = object_class(int(slot.observation["object_classes"][slot.held])).name if slot.held < n else "nothing"
         action = Action(slot.previous).name if slot.previous >= 0 else "–"
         skill = f"{slot.chain.task} object {slot.chain.index}" if slot.chain.task and not slot.done else "–"
-        self.captions.append(f"step {slot.steps}  last action {action}\nskill: {skill}  holding: {held}")
+        self.captions.append(f"step {slot.steps}  last action {action}\nskill: {skill}  holding: {held}"
+                             + stated_caption(belief))
 
 
 def write_policy_video(path: Path, sim: SimConfig, tracker: BatchTracker, skills: dict[str, Skill], decide: Decide,

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import imageio.v3 as iio
+import numpy as np
 import pytest
 from sb3_contrib import MaskablePPO
 
@@ -47,3 +48,16 @@ def test_a_baselines_video_plays_the_episode_its_evaluation_plays(variant: str, 
     (_, played), = play_lockstep("rearrange", [("key", 5)], sim, RenderingTruthTracker(), {"pick": pick, "drop": drop},
                                  decide, method_inputs(method), n_envs=1, horizon=HORIZON)
     assert metrics == played["metrics"]
+
+
+def test_the_caption_states_what_the_lnet_has_found_and_may_have_lost() -> None:
+    from dataclasses import replace
+
+    from mor.eval.video import stated_caption
+    from mor.policy.belief import PoseBelief
+
+    truth = PoseBelief.from_truth(np.zeros((1, 3)), np.zeros((1, 3, 2)))
+    assert stated_caption(truth) == ""  # the truth states nothing beyond its poses
+    stated = replace(truth, object_found=np.array([[1.0, 0.0, 1.0]], np.float32),
+                     object_lost=np.array([[0.1, 0.2, 0.0]], np.float32))
+    assert stated_caption(stated) == "\nL-Net: 0: found, lost 0.10; 1: searching; 2: found"
