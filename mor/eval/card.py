@@ -103,12 +103,14 @@ def held_out_section(rows: list[dict[str, Any]]) -> list[str]:
         return []
     lines = ["", "## Held-out episodes", "", "Each metric on the protocol's evaluation seeds and on seeds it never "
              "used, mean [95% interval].", "",
-             "| method | seeds (protocol / held out) | " + " | ".join(METRIC_LABELS[m] for m in METRIC_NAMES) + " |",
-             "|---|---|" + "---|" * len(METRIC_NAMES)]
+             "| method | training runs (protocol / held out) | seeds (protocol / held out) | "
+             + " | ".join(METRIC_LABELS[m] for m in METRIC_NAMES) + " |", "|---|---|---|" + "---|" * len(METRIC_NAMES)]
     for protocol, held in pairs:
         cells = [" / ".join(f"{row['metrics'][m]['mean']:.3f} [{row['metrics'][m]['ci95'][0]:.3f}, "
                             f"{row['metrics'][m]['ci95'][1]:.3f}]" for row in (protocol, held)) for m in METRIC_NAMES]
-        lines.append(f"| `{held['method']}` | {protocol['seeds']} / {held['seeds']} | " + " | ".join(cells) + " |")
+        runs = " / ".join(str(len(row.get("training_seeds") or [])) for row in (protocol, held))
+        lines.append(f"| `{held['method']}` | {runs} | {protocol['seeds']} / {held['seeds']} | " + " | ".join(cells)
+                     + " |")
     return lines
 
 
@@ -154,8 +156,8 @@ def headline_markdown(results: dict[str, Any], card: str = "cards/results") -> s
     with its 95% interval beside the paper's number; a stale row marked †; ``card``: the results card's folder,
     relative to the README (the table's figure and the full tables are linked there)."""
     k = METRIC_NAMES.index(HEADLINE_METRIC)
-    lines = ["| Method | training runs | Rearrangement success, ours [95% interval] | The paper's number (paper, mean ± "
-             "std) |", "|---|---|---|---|"]
+    lines = ["| Method | training runs | Rearrangement success, ours [95% interval] | The paper's number (paper, "
+             "mean ± std) |", "|---|---|---|---|"]
     stale, missing, protocols = [], [], set()
     for line in headline_lines():
         row = find_row(results["rows"], line.match)
