@@ -70,7 +70,10 @@ def policy_card_markdown(variant: str, summaries: dict[str, dict[str, Any]], row
         lines.append("Not evaluated yet: run `mor eval run --method " + variant + "` then `mor eval results`.")
     for row in rows:
         reference = paper_reference(row)
-        lines += [f"`{row['method']}`: {len(row['seeds'])} seeds × {row['episodes_per_seed']} episodes per task "
+        run = (f", training run {row.get('training_seed') or 0}"
+               + (", held-out evaluation seeds" if row.get("episodes") == "held_out" else ""))
+        lines += [f"`{row['method']}`{run}: evaluation seeds {row['seeds']} × {row['episodes_per_seed']} episodes "
+                  "per task "
                   "(mean ± std over seeds [95% bootstrap interval]); *paper* = the paper's published number.", "",
                   "| metric | ours | paper |", "|---|---|---|"]
         for metric in METRIC_NAMES:
