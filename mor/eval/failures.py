@@ -53,22 +53,25 @@ class EndingDiary(gym.Wrapper):
         return observation, info
 
     def step(self, action: int) -> tuple[Any, float, bool, bool, dict[str, Any]]:
-        base = self.env.unwrapped
-        fixed_before = metrics.is_fixed(base.state.floor_positions, base.layout.target_positions) & \
-            base.state.on_floor()
+        picking = self.task == "rearrange" and int(action) == Action.PICK  # only then can a placed object move
+        fixed_before = self._fixed() if picking else None
         observation, reward, terminated, truncated, info = self.env.step(action)
         self.steps += 1
         if info["picked"] >= 0 or info["dropped"] >= 0:
             self.last_event_step = self.steps
-        if info["picked"] >= 0 and fixed_before[info["picked"]]:
+        if info["picked"] >= 0 and fixed_before is not None and fixed_before[info["picked"]]:
             self.repicked += 1
-        if info["dropped"] >= 0 and not metrics.is_fixed(base.state.floor_positions[[info["dropped"]]],
-                                                         base.layout.target_positions[[info["dropped"]]])[0]:
+        if info["dropped"] >= 0 and not self._fixed()[info["dropped"]]:
             self.dropped_off += 1
         self._watch()
         if terminated or truncated:
             info = {**info, "ending": self._ending(int(action), info, truncated and not terminated)}
         return observation, reward, terminated, truncated, info
+
+    def _fixed(self) -> Any:
+        """(n,) bool: each object lies on the floor within the success radius of its target (``metrics.is_fixed``)."""
+        base = self.env.unwrapped
+        return metrics.is_fixed(base.state.floor_positions, base.layout.target_positions) & base.state.on_floor()
 
     def _watch(self) -> None:
         """Remember whether the Pick target has been in view (the first-person camera's field of view)."""

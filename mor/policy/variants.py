@@ -11,7 +11,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-from mor.errors import ConfigError
 from mor.policy.names import TASKS, Task
 
 Source = Literal["truth", "lnet", "pixels"]
@@ -75,14 +74,6 @@ POSE_VARIANTS: tuple[str, ...] = tuple(name for name, variant in VARIANTS.items(
 #: the variant that sees the true poses, and the one that sees them through the L-Net with its uncertainty
 GROUND_TRUTH: Variant = next(v for v in VARIANTS.values() if v.source == "truth")
 OURS: Variant = next(v for v in VARIANTS.values() if v.uses_lnet and v.ablation_of is None)
-
-
-def variant(name: str) -> Variant:
-    """The variant called ``name``; a ConfigError listing the known ones otherwise."""
-    if name not in VARIANTS:
-        raise ConfigError(f"variant: unknown variant {name!r}; choose one of {', '.join(VARIANTS)}")
-    return VARIANTS[name]
-
 
 
 def seed_folder(root: Path, variant: str, seed: int = 0) -> Path:
