@@ -47,7 +47,7 @@ def run(profile: Profile, study: str, steps: int, episodes: int, pretrain_steps:
         summary = train(config, params, paths.LEROBOT / "train", paths.LEROBOT / "validation", out, version, device)
         model = load_lnet(out / BEST, device, signature(config, version, summary["image_size"]), calibrated=False).model
         model.use_tracking(TrackingSettings(data_association=profile.lnet.data_association
-                                            and config.tracker == "filter"))
+                                            and config.tracker == "filter", gate=profile.lnet.gate))
         _, calibration, _, _ = calibrate(model, frame_estimates(model, paths.LEROBOT / "validation", episodes, device))
         test = predict(model, paths.LEROBOT / "test", episodes, device)
         scored = metrics(calibration.scales.apply(test, test.confusable))

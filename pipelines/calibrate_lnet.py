@@ -48,12 +48,13 @@ def _calibrate(profile: Profile) -> dict[str, Any]:
     rules = (not chosen, chosen) if runner.config.tracker == "filter" else (chosen,)  # the chosen one last: kept
     fits = {}
     for rule in rules:
-        runner.model.use_tracking(TrackingSettings(data_association=rule))
-        fits[rule] = calibrate(runner.model, episodes, criterion, arena if lost else None)
+        runner.model.use_tracking(TrackingSettings(data_association=rule, gate=profile.lnet.gate))
+        fits[rule] = calibrate(runner.model, episodes, criterion, arena if lost else None, profile.lnet.not_found_sigma)
     predictions, calibration, tried, inputs = fits[chosen]
     check_scales(calibration, paths.LNET_CALIBRATION)
     after = {rule: calibrated_metrics(p, fitted, rule_inputs) for rule, (p, fitted, _, rule_inputs) in fits.items()}
-    inputs = inputs or stated_inputs(predictions, arena)  # for the criteria with lost probabilities (and search)
+    # for the criteria with lost probabilities (and search)
+    inputs = inputs or stated_inputs(predictions, arena, profile.lnet.not_found_sigma)
     name = criterion_name(criterion, lost)
     by_criterion = {criterion_name(other, with_lost): calibration if criterion_name(other, with_lost) == name else
                     tracked_calibration(runner.model, predictions, other, inputs if with_lost else None)

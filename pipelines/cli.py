@@ -433,8 +433,7 @@ def bench_lnet(
     import torch
 
     from mor.lnet.bench import benchmark_lnet, benchmark_streaming
-    from mor.lnet.calibration_file import FittedCalibration
-    from mor.lnet.filter import TrackingSettings
+    from mor.lnet.calibration_file import chosen_calibration, recorded_settings
     from mor.lnet.model import LNet
     from mor.lnet.runtime import load_lnet
     from pipelines.io import write_json
@@ -446,12 +445,12 @@ def bench_lnet(
         typer.echo(f"{name}: {entry['frames_per_s']:.0f} frames/s")
     committed = paths.LNET_CARD / "model.pt"
     runner = load_lnet(committed) if committed.is_file() else None
-    if runner is not None and (runner.config, runner.image_size, runner.fitted.tracking.data_association) == (
-            config.lnet.model, config.sim.image_size, config.lnet.data_association):
+    if runner is not None and (runner.config, runner.image_size, recorded_settings(runner.fitted)) == (
+            config.lnet.model, config.sim.image_size, config.lnet.chosen_settings()):
         model, fitted, weights = runner.model, runner.fitted, committed.as_posix()
     else:  # none committed, or one of another config than this profile's
         model = LNet(config.lnet.model)
-        fitted = FittedCalibration(tracking=TrackingSettings(data_association=config.lnet.data_association))
+        fitted = chosen_calibration(config.lnet.chosen_settings())
         weights = "random"
     streaming = result["streaming"] = benchmark_streaming(model, fitted, config.sim, n_envs, steps, repeats)
     streaming["weights"] = weights

@@ -3,8 +3,9 @@ validation (``mor.lnet.calibration_fit``), read by whoever loads the checkpoint 
 
 It holds three records, as flat JSON fields: the scales of the stated uncertainty (``mor.lnet.calibration``:
 ``agent_scale``, ``object_scale``, ``kappa_scale``, ``shared_colour_scale``), the tracking settings they were fitted
-with (``mor.lnet.filter.TrackingSettings``: ``data_association``, ``noise_own``, ``noise_shared``) and the stated
-belief's parameters (``mor.lnet.stated.StatedParams``: ``lost_own``, ``lost_shared``, ``search_find``). A file
+with (``mor.lnet.filter.TrackingSettings``: ``data_association``, ``noise_own``, ``noise_shared``, ``gate``) and
+the stated belief's parameters (``mor.lnet.stated.StatedParams``: ``lost_own``, ``lost_shared``, ``search_find``,
+``not_found_sigma``). A file
 without some of them predates them and was fitted without them: they read as their defaults.
 """
 
@@ -12,7 +13,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +42,24 @@ class FittedCalibration:
                 **tracking, **stated}
 
 
+def recorded_settings(fitted: FittedCalibration) -> dict[str, Any]:
+    """The tracking-time settings a run chooses in its profile (``LNetParams.chosen_settings``: the tracking rule,
+    the filter's gate, the not-found width) that ``fitted`` was fitted with."""
+    return {"data_association": fitted.tracking.data_association, "gate": fitted.tracking.gate,
+            "not_found_sigma": fitted.stated.not_found_sigma}
+
+
+def chosen_calibration(chosen: dict[str, Any], tracking: TrackingSettings | None = None,
+                       stated: StatedParams | None = None) -> FittedCalibration:
+    """A calibration with the chosen settings ``chosen`` (``recorded_settings``' keys, each optional) over
+    ``tracking`` and ``stated`` (None: the defaults), identity scales: what a run tracks with before (or without)
+    calibrate-lnet's fit."""
+    tracking, stated = tracking or TrackingSettings(), stated or StatedParams()
+    return FittedCalibration(
+        tracking=replace(tracking, **{key: chosen[key] for key in ("data_association", "gate") if key in chosen}),
+        stated=replace(stated, **{key: chosen[key] for key in ("not_found_sigma",) if key in chosen}))
+
+
 def _optional(value: Any) -> float | None:
     return None if value is None else float(value)
 
@@ -55,9 +74,10 @@ def calibration_from_values(values: dict[str, Any]) -> FittedCalibration:
         Calibration(*(float(values[key]) for key in ("agent_scale", "object_scale", "kappa_scale")),
                     shared_colour_scale=_optional(values.get("shared_colour_scale"))),
         TrackingSettings(data_association, float(values.get("noise_own", 1.0)),
-                         float(values.get("noise_shared", 1.0))),
+                         float(values.get("noise_shared", 1.0)), float(values.get("gate", TrackingSettings.gate))),
         StatedParams(float(values.get("lost_own", 0.0)), _optional(values.get("lost_shared")),
-                     _optional(values.get("search_find"))))
+                     _optional(values.get("search_find")),
+                     float(values.get("not_found_sigma", StatedParams.not_found_sigma))))
 
 
 def read_calibration(path: Path, dataset_version: str | None = None) -> FittedCalibration:

@@ -38,8 +38,6 @@ from torch import nn
 from mor.lnet.likelihoods import MIN_KAPPA
 from mor.sim.rules import DROP_DISTANCE, N_ACTIONS
 
-#: Mahalanobis^2 of an innovation beyond which a measurement is gated out (chi-square, 2 dof, 99%).
-GATE = 9.21
 _GATE_SHARPNESS = 2.0
 _EPS = 1e-6
 _MAX_LOG_RATIO = 60.0  # exp(60) ~ 1e26: a claim this much better takes the measurement whole
@@ -54,13 +52,15 @@ FilterState = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torc
 class TrackingSettings:
     """How the filter tracks, chosen by whoever runs it (module docstring), not weights: ``data_association`` the
     rule; ``noise_own`` and ``noise_shared`` the multipliers (> 0) of the object measurement covariance for objects
-    of a colour of their own and for objects sharing their colour. ``calibration.json`` records the settings its
-    scales were fitted with (``mor.lnet.calibration_file``); ``LNet.use_tracking`` applies them. The LSTM tracker
-    has none: only the defaults."""
+    of a colour of their own and for objects sharing their colour; ``gate`` the squared Mahalanobis distance of an
+    innovation beyond which a measurement is gated out (default: chi-square, 2 dof, 99%; ``lnet.gate``).
+    ``calibration.json`` records the settings its scales were fitted with (``mor.lnet.calibration_file``);
+    ``LNet.use_tracking`` applies them. The LSTM tracker has none: only the defaults."""
 
     data_association: bool = False
     noise_own: float = 1.0
     noise_shared: float = 1.0
+    gate: float = 9.21
 
 
 def _eye(like: torch.Tensor) -> torch.Tensor:
@@ -101,20 +101,20 @@ def _squared_mahalanobis(difference: torch.Tensor, inverse: torch.Tensor) -> tor
 
 
 def _kalman(mean: torch.Tensor, cov: torch.Tensor, z: torch.Tensor, noise: torch.Tensor,
-            weight: torch.Tensor | None = None, gated: bool = False, spread: bool = False
+            weight: torch.Tensor | None = None, gate: float | None = None, spread: bool = False
             ) -> tuple[torch.Tensor, torch.Tensor]:
     """A Kalman update of N(mean, cov) by a direct measurement z ~ N(x, noise). The gain is scaled by ``weight``
-    (in [0, 1]; None: 1) and, when ``gated``, by a soft gate that drops innovations beyond ``GATE`` (Mahalanobis^2
+    (in [0, 1]; None: 1) and, given a ``gate``, by a soft gate that drops innovations beyond it (Mahalanobis^2
     under cov + noise). ``spread``: the covariance of the mixture "updated with probability w, else not" (adds
     w (1 - w) (K v)(K v)^T, v the innovation). Returns (mean, cov); (1 - w K) cov stays positive semi-definite for
     w in [0, 1]."""
     innovation = z - mean
     s_inv = _inverse(cov + noise)
     gain = cov @ s_inv
-    if gated:
+    if gate is not None:
         d2 = _squared_mahalanobis(innovation, s_inv)
-        gate = torch.sigmoid(_GATE_SHARPNESS * (GATE - d2))
-        weight = gate if weight is None else gate * weight
+        kept = torch.sigmoid(_GATE_SHARPNESS * (gate - d2))
+        weight = kept if weight is None else kept * weight
     full_step = (gain @ innovation.unsqueeze(-1))[..., 0]
     if weight is None:
         return mean + full_step, _symmetric(cov - gain @ cov)
@@ -246,6 +246,6 @@ class BeliefFilter(nn.Module):
         weight = (~is_held).to(objects.dtype) if visibility is None else visibility * ~is_held
         if self.tracking.data_association:
             weight = associate(weight, measured, noise, objects, object_cov)
-        objects, object_cov = _kalman(objects, object_cov, measured, noise, weight, gated=True,
+        objects, object_cov = _kalman(objects, object_cov, measured, noise, weight, gate=self.tracking.gate,
                                       spread=self.tracking.data_association)
         return agent, agent_cov, heading, heading_var, objects, object_cov, held

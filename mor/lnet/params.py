@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
@@ -97,6 +97,17 @@ class LNetParams(ParamsModel):
                                    "(mor.lnet.filter: a measurement two slots claim is shared by how well each belief "
                                    "explains it, and doubtful updates widen the belief); a tracking-time rule, not "
                                    "used in training, fitted and recorded by mor calibrate-lnet")
+    gate: float = Field(9.21, gt=0, description="the filter's gate: the squared Mahalanobis distance of an "
+                        "innovation beyond which an object measurement is dropped (9.21: chi-square, 2 dof, 99%); "
+                        "a tracking-time setting, recorded by mor calibrate-lnet")
+    not_found_sigma: float = Field(1.0, gt=0, description="metres: a belief wider than this (geometric mean of its "
+                                   "standard deviations, uncalibrated) has not found its object, and its stated "
+                                   "belief is the search belief (mor.lnet.stated); recorded by mor calibrate-lnet")
+
+    def chosen_settings(self) -> dict[str, Any]:
+        """The tracking-time settings this profile chooses, which ``calibrate-lnet`` records and ``load_lnet`` checks
+        against the calibration (``mor.lnet.calibration_file.recorded_settings``)."""
+        return {"data_association": self.data_association, "gate": self.gate, "not_found_sigma": self.not_found_sigma}
 
     @model_validator(mode="after")
     def _association_needs_the_filter(self) -> LNetParams:

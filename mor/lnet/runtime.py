@@ -29,7 +29,8 @@ import torch
 from mor.data.observations import env_to_network
 from mor.errors import MorError
 from mor.lnet.calibration import Calibration
-from mor.lnet.calibration_file import CALIBRATION_FILE, FittedCalibration, read_calibration
+from mor.lnet.calibration_file import (CALIBRATION_FILE, FittedCalibration, chosen_calibration, read_calibration,
+                                      recorded_settings)
 from mor.lnet.checkpoint import load_checkpoint, model_from_checkpoint
 from mor.lnet.filter import TrackingSettings
 from mor.lnet.model import LNet, PoseEstimate
@@ -158,26 +159,29 @@ class LNetRunner:
 
 
 def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str, Any] | None = None,
-              calibrated: bool = True, compiled: bool = False, data_association: bool | None = None,
+              calibrated: bool = True, compiled: bool = False, chosen: dict[str, Any] | None = None,
               encoder_precision: str = "float32") -> LNetRunner:
     """The trained L-Net at ``path`` with the calibration stored beside it (``calibration.json``).
 
     expected: a ``mor.lnet.checkpoint.signature`` (or part of one) the checkpoint must match: another tracker,
     config, dataset version or image size is one clear error naming both sides. calibrated=False: identity scales
     (what the calibration stage itself needs). compiled: the streaming step through ``torch.compile``.
-    data_association: the tracking rule (``mor.lnet.filter``); None: the one the calibration was fitted for (none
-    when uncalibrated); given with a calibration fitted for the other rule, one clear error. encoder_precision:
+    chosen: the run's tracking-time settings (``LNetParams.chosen_settings``: the tracking rule, the filter's gate,
+    the not-found width); None: those the calibration was fitted with (the defaults when
+    uncalibrated); one given with a calibration fitted with another value, one clear error. encoder_precision:
     float32 or bfloat16 (``LNet.use_encoder_precision``), whichever the weights were trained with.
     """
     path = Path(path)
     saved = load_checkpoint(path, expected or {}, device)
     version = str(saved["dataset_version"])
     beside = path.parent / CALIBRATION_FILE
-    fitted = read_calibration(beside, version) if calibrated else FittedCalibration(
-        tracking=TrackingSettings(data_association=bool(data_association)))
-    if data_association is not None and data_association != fitted.tracking.data_association:
-        raise MorError(f"{beside}: fitted with data_association {fitted.tracking.data_association} but this run's is "
-                       f"{data_association} (lnet.data_association); run mor calibrate-lnet")
+    chosen = chosen or {}
+    fitted = read_calibration(beside, version) if calibrated else chosen_calibration(chosen)
+    recorded = recorded_settings(fitted)
+    for key, value in chosen.items():
+        if value != recorded[key]:
+            raise MorError(f"{beside}: fitted with {key} {recorded[key]} but this run's is {value} (lnet.{key}); "
+                           "run mor calibrate-lnet")
     model = model_from_checkpoint(saved, device)
     model.use_encoder_precision(encoder_precision)
     return LNetRunner(model, fitted, int(saved["image_size"]), version, device, file_digest(path), compiled)
@@ -195,6 +199,8 @@ def lnet_identity(dataset_version: str, checkpoint_digest: str | None, fitted: F
         # The fields one Calibration record held when the hash was introduced, the lost probabilities at their
         # defaults: every identity recorded since stands (docs/assumptions.md, "L-Net identity").
         hashed = {**asdict(fitted.scales), **asdict(fitted.tracking), "lost_own": 0.0, "lost_shared": None}
+        if fitted.tracking.gate == TrackingSettings.gate:  # the gate joined the record later, at its default
+            del hashed["gate"]
         identity += "-cal" + hashlib.sha256(json.dumps(hashed, sort_keys=True).encode()).hexdigest()[:8]
     return identity + ("-bf16" if encoder_precision == "bfloat16" else "")
 

@@ -6,7 +6,8 @@ Per object, from the tracker's Gaussian (before calibration) and the calibration
 - the probability that the belief is lost, the object anywhere in the arena instead (``mor.lnet.lost``), by group:
   objects of a colour of their own (``StatedParams.lost_own``) and confusable ones (``lost_shared``);
 - whether the belief has found its object: not while its uncalibrated geometric-mean standard deviation is above
-  ``NOT_FOUND_SIGMA`` (the filter's prior is about 1.7 m wide and one sighting brings a belief to tenths of a metre);
+  ``StatedParams.not_found_sigma`` (``lnet.not_found_sigma``, 1 m: the filter's prior is about 1.7 m wide and one
+  sighting brings a belief to tenths of a metre);
 - for a belief not found yet, the search belief over where the camera has not looked (``mor.lnet.search``), each
   look finding the object with probability ``StatedParams.search_find`` (None: not fitted, such an object's stated
   belief is its Gaussian too).
@@ -32,20 +33,19 @@ from mor.lnet.predictions import Predictions
 from mor.lnet.search import SearchLooks, SearchMap, search_log_density, search_looks, search_mass
 from mor.sim.arena import Arena
 
-#: A belief wider than this (m, geometric mean of its standard deviations, uncalibrated) has not found its object.
-NOT_FOUND_SIGMA = 1.0
-
-
 @dataclass(frozen=True)
 class StatedParams:
     """The stated belief's fitted parameters (``mor.lnet.calibration_fit``, stored in ``calibration.json``): the
     probability that an object's belief is lost for objects of their own colour (``lost_own``) and confusable ones
     (``lost_shared``, None: the same as ``lost_own``), each in [0, 1); the probability in [0, 1] that one look finds
-    an object not found yet (``search_find``; None: no search belief)."""
+    an object not found yet (``search_find``; None: no search belief); and, chosen not fitted
+    (``lnet.not_found_sigma``), the width (m, geometric mean of the standard deviations, uncalibrated) above which
+    a belief has not found its object."""
 
     lost_own: float = 0.0
     lost_shared: float | None = None
     search_find: float | None = None
+    not_found_sigma: float = 1.0
 
     def lost(self, confusable_mask: np.ndarray) -> np.ndarray:
         """(..., K) float64 the probability that each object's belief is lost, by group: confusable_mask (..., K)
@@ -54,9 +54,10 @@ class StatedParams:
         return np.where(np.asarray(confusable_mask), shared, self.lost_own)
 
 
-def not_found(object_tril: np.ndarray) -> np.ndarray:
-    """(...) whether each belief (lower Cholesky factors (..., 2, 2), uncalibrated) has not found its object."""
-    return np.sqrt(np.abs(object_tril[..., 0, 0] * object_tril[..., 1, 1])) > NOT_FOUND_SIGMA
+def not_found(object_tril: np.ndarray, sigma: float) -> np.ndarray:
+    """(...) whether each belief (lower Cholesky factors (..., 2, 2), uncalibrated) has not found its object: wider
+    than ``sigma`` metres (``StatedParams.not_found_sigma``)."""
+    return np.sqrt(np.abs(object_tril[..., 0, 0] * object_tril[..., 1, 1])) > sigma
 
 
 @dataclass(frozen=True)
@@ -102,7 +103,7 @@ def stated_estimates(last: PoseEstimate, object_classes: np.ndarray, held: np.nd
     calibrated; ``search``: the environments' looks so far, this step's included (None: no search density)."""
     mask = confusable(object_classes, held)
     as_numpy = lambda t: t.float().cpu().numpy()  # noqa: E731
-    searching = not_found(as_numpy(last.object_tril))  # judged on the uncalibrated belief
+    searching = not_found(as_numpy(last.object_tril), params.not_found_sigma)  # judged on the uncalibrated belief
     last = calibration.apply(last, torch.as_tensor(mask, device=last.agent_mean.device))
     density = None if search is None or params.search_find is None else \
         search.density(params.search_find).astype(np.float32)
@@ -115,24 +116,26 @@ def stated_estimates(last: PoseEstimate, object_classes: np.ndarray, held: np.nd
 class StatedInputs:
     """What the objects' stated belief needs of a set of predictions beyond their Gaussians: the arena shares of
     the lost belief (``mor.lnet.lost``), the looks of the search belief (``mor.lnet.search``) and which beliefs
-    have not found their object (N, K), judged on the uncalibrated beliefs."""
+    have not found their object (N, K), judged on the uncalibrated beliefs by ``not_found_sigma`` (m)."""
 
     shares: ArenaShares
     looks: SearchLooks
     not_found: np.ndarray
+    not_found_sigma: float
 
     def select(self, rows: np.ndarray) -> StatedInputs:
         """The inputs of the frames ``rows`` (as ``Predictions.select``)."""
-        return StatedInputs(self.shares.select(rows), self.looks.select(rows), self.not_found[rows])
+        return StatedInputs(self.shares.select(rows), self.looks.select(rows), self.not_found[rows],
+                            self.not_found_sigma)
 
 
-def stated_inputs(predictions: Predictions, arena: Arena) -> StatedInputs:
+def stated_inputs(predictions: Predictions, arena: Arena, not_found_sigma: float) -> StatedInputs:
     """``StatedInputs`` of the present objects of ``predictions`` (uncalibrated: which beliefs are not found is
-    judged on their own width)."""
+    judged on their own width, against ``not_found_sigma`` metres)."""
     p = predictions
     return StatedInputs(arena_shares(p.object_truth, p.object_mean, p.object_tril, p.present, arena),
                         search_looks(p.agent_mean, p.heading, p.object_truth, p.episode, arena),
-                        p.present & not_found(p.object_tril))
+                        p.present & not_found(p.object_tril, not_found_sigma), not_found_sigma)
 
 
 def stated_truth(d2: np.ndarray, half_log_det: np.ndarray, lost: np.ndarray, inputs: StatedInputs | None,

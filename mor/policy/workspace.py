@@ -36,11 +36,11 @@ class Workspace:
 
 def committed_lnet(workspace: Workspace, variant: Variant, lnet: LNetParams) -> LNetRunner | None:
     """The committed L-Net of ``workspace`` (``model.pt`` + its calibration; compiled when ``lnet.compile_step``,
-    with ``lnet.encoder_precision`` and ``lnet.data_association``) for a variant that observes through it; None for
-    the others."""
+    with ``lnet.encoder_precision`` and the tracking settings ``lnet.chosen_settings``) for a variant that observes
+    through it; None for the others."""
     if not variant.uses_lnet:
         return None
     from mor.lnet.runtime import load_lnet  # noqa: PLC0415 - torch only where needed
 
     return load_lnet(workspace.lnet_card / "model.pt", compiled=lnet.compile_step,
-                     data_association=lnet.data_association, encoder_precision=lnet.encoder_precision)
+                     chosen=lnet.chosen_settings(), encoder_precision=lnet.encoder_precision)

@@ -297,9 +297,9 @@ def test_em_recovers_the_scale_and_the_lost_probability() -> None:
 def test_lost_probabilities_make_a_heavy_tail_honest_where_no_gaussian_scale_can(criterion: str) -> None:
     fit_on, test_on = _lost_predictions(3000, lost=0.2, seed=1), _lost_predictions(3000, lost=0.2, seed=2)
     gaussian = fit_calibration(fit_on, criterion)
-    lost = fit_calibration(fit_on, criterion, stated_inputs(fit_on, ARENA))
+    lost = fit_calibration(fit_on, criterion, stated_inputs(fit_on, ARENA, 1.0))
     assert gaussian.stated.lost_own == 0.0 and lost.stated.lost_own == pytest.approx(0.2, abs=0.04)
-    shares = stated_inputs(test_on, ARENA)
+    shares = stated_inputs(test_on, ARENA, 1.0)
 
     def worst(calibration: FittedCalibration) -> float:
         coverage = calibrated_metrics(test_on, calibration, shares)["stated"]["coverage"]["objects_seen"]

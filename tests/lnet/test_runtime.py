@@ -76,7 +76,7 @@ def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration(conf
     assert all(v.dtype == np.float32 for k, v in vars(estimates).items()
                if k not in ("object_searching", "search_density"))
     uncalibrated = tracked.object_tril[:, -1, :2].numpy()  # 'not found' is judged before the calibration's x 0.5
-    np.testing.assert_array_equal(estimates.object_searching, not_found(uncalibrated))
+    np.testing.assert_array_equal(estimates.object_searching, not_found(uncalibrated, 1.0))
     np.testing.assert_allclose(estimates.agent_mean, tracked.agent_mean[:, -1].numpy(), atol=1e-5)
     np.testing.assert_allclose(estimates.object_mean, tracked.object_mean[:, -1, :2].numpy(), atol=1e-5)
     tril = tracked.agent_tril[:, -1]
@@ -198,8 +198,22 @@ def test_the_tracking_rule_follows_the_calibration_and_a_mismatch_is_one_clear_e
     assert runner.model.tracking.data_association and "-cal" in runner.identity
     assert checkpoint_identity(checkpoint) == runner.identity
     with pytest.raises(MorError, match="fitted with data_association True but this run's is False"):
-        load_lnet(checkpoint, data_association=False)
+        load_lnet(checkpoint, chosen={"data_association": False})
+    with pytest.raises(MorError, match=r"fitted with gate 9.21 but this run's is 4.0 \(lnet.gate\)"):
+        load_lnet(checkpoint, chosen={"gate": 4.0})
+    with pytest.raises(MorError, match="fitted with not_found_sigma 1.0 but this run's is 2.0"):
+        load_lnet(checkpoint,
+                  chosen=LNetParams(model=config, data_association=True, not_found_sigma=2.0).chosen_settings())
     assert not load_lnet(checkpoint, calibrated=False).model.tracking.data_association
+    # the settings a profile chooses are recorded beside the fitted scales and read back; the default gate leaves
+    # the identity as it was before the gate was recorded, another gate gives another identity
+    chosen = {"data_association": True, "gate": 4.0, "not_found_sigma": 2.0}
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, **chosen}))
+    tuned = load_lnet(checkpoint, chosen=chosen)
+    assert (tuned.model.tracking.gate, tuned.fitted.stated.not_found_sigma) == (4.0, 2.0)
+    assert tuned.identity != runner.identity
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True, "gate": 9.21}))
+    assert load_lnet(checkpoint).identity == runner.identity
     # the measurement noise the calibration was fitted with is the one tracked with; another calibration, another
     # identity (a policy trained through the first is stale for the second)
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True, "noise_own": 0.5,

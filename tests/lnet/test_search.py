@@ -17,7 +17,7 @@ from mor.lnet.search import (
     search_log_density,
     search_mass,
 )
-from mor.lnet.stated import not_found
+from mor.lnet.stated import StatedParams, not_found
 from mor.sim.arena import Arena
 
 ARENA = Arena.build("square", 6.0)
@@ -75,9 +75,10 @@ def test_log_density_integrates_to_one_and_rules_out_looked_places_at_find_one()
     assert np.all(search_mass(certain, 1.0)[1:] == 1.0)
 
 
-def test_not_found_is_a_belief_wider_than_a_metre() -> None:
+def test_not_found_is_a_belief_wider_than_the_chosen_width() -> None:
     tril = np.stack([np.eye(2) * 1.5, np.eye(2) * 0.3, np.diag([4.0, 0.2])])
-    assert not_found(tril).tolist() == [True, False, False]
+    assert not_found(tril, StatedParams.not_found_sigma).tolist() == [True, False, False]  # 1 m
+    assert not_found(tril, 0.25).tolist() == [True, True, True]
 
 
 def test_the_streaming_search_map_counts_what_the_episode_looks_count() -> None:
