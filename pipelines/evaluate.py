@@ -90,7 +90,7 @@ def policy_video(profile: Profile, method_name: str, seed: int, out: Path) -> di
         raise ConfigError(f"--policy: {method_name!r} is scripted; use mor sim video --policy {method_name}")
     loaded = load_method(method, workspace_record(Path("."), profile), profile)
     policies, arena = loaded.policies, Arena.build(profile.sim.arena, profile.sim.arena_size)
-    return write_policy_video(out, sim_of(method, profile.sim), loaded.tracker_factory(1),
+    return write_policy_video(out, sim_of(method, profile.sim), loaded.tracker_factory(1, looks=True),
                               {"pick": policies.pick, "drop": policies.drop}, decider(method, policies, arena),
                               method_inputs(method), seed, horizon=profile.evaluate.horizon)
 

@@ -100,6 +100,9 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     assert lnet_pick["warm_start"] and lnet_pick["steps"] == tiny["policy"]["lnet_steps"]["pick"]
     for method in ("oracle", "gt_pose", "lnet", "lnet_no_uncertainty", "lnet_nearest_rule"):
         _run("eval", "run", "--method", method, "--profile", "tiny")
+    for method in ("gt_pose", "lnet", "lnet_nearest_rule"):  # `mor sim video --policy` offers every method
+        out = workspace / f"{method}.gif"
+        assert f"wrote {out}" in _run("sim", "video", "--policy", method, "--profile", "tiny", "--out", str(out))
     records = (workspace / "datasets/eval/lnet.jsonl").read_text().splitlines()
     protocol = tiny["evaluate"]
     assert len(records) == 3 * len(protocol["seeds"]) * protocol["episodes"]

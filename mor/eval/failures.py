@@ -11,6 +11,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from mor.policy.hierarchy import SKILL_HORIZON
 from mor.sim import metrics
 from mor.sim.catalog import object_class
 from mor.sim.rules import Action, visible
@@ -25,8 +26,8 @@ ENDINGS: dict[str, tuple[str, ...]] = {
     "rearrange": ("success", "obstructed", "horizon, a skill never ended", "horizon, a placed object picked again",
                   "horizon, an object dropped off target", "horizon, other"),
 }
-#: steps after which a skill that has not ended counts as stuck: a skill's own task horizon (Pick and Drop)
-SKILL_HORIZON_STEPS = PickEnv.default_horizon
+#: steps after which a skill that has not ended counts as stuck: the longest of the skills' own task horizons
+SKILL_HORIZON_STEPS = max(SKILL_HORIZON.values())
 
 
 class EndingDiary(gym.Wrapper):

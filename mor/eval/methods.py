@@ -85,13 +85,14 @@ class TrainedPolicies:
 
 @dataclass
 class LoadedMethod:
-    """A method ready to play: its policies (None for the scripted ones), a factory of trackers for n envs at once,
-    the L-Net it observes through and that L-Net's identity (None without one), and the committed folder of each
-    policy."""
+    """A method ready to play: its policies (None for the scripted ones), a factory of trackers for n envs at once
+    (``looks=True``: an L-Net tracker also keeps the search belief's looks, for pictures, whether or not the policy
+    reads them), the L-Net it observes through and that L-Net's identity (None without one), and the committed
+    folder of each policy."""
 
     method: Method
     policies: TrainedPolicies | None = None
-    tracker_factory: Callable[[int], BatchTracker] | None = None
+    tracker_factory: Callable[..., BatchTracker] | None = None
     lnet: LNetRunner | None = None
     folders: dict[Task, Path] = field(default_factory=dict)
 
@@ -156,7 +157,9 @@ def load_method(method: Method, workspace: Workspace, profile: Profile, zero_sho
     if runner is not None:
         from mor.policy.lnet_tracking import LNetBatchTracker  # noqa: PLC0415
 
-        arena = Arena.build(sim.arena, sim.arena_size) if method.variant.search else None
-        return LoadedMethod(method, policies, lambda n: LNetBatchTracker(runner, n, arena), runner, folders)
+        arena, search = Arena.build(sim.arena, sim.arena_size), method.variant.search
+        return LoadedMethod(method, policies,
+                            lambda n, looks=False: LNetBatchTracker(runner, n, arena if search or looks else None),
+                            runner, folders)
     tracker = RenderingTruthTracker if method.is_baseline else GroundTruthBatchTracker
-    return LoadedMethod(method, policies, lambda n: tracker(), None, folders)
+    return LoadedMethod(method, policies, lambda n, looks=False: tracker(), None, folders)

@@ -1,5 +1,6 @@
 """A policy video: one rearrangement episode played by the hierarchy (``SkillHierarchy``), the first-person view
-beside a top-down view of the truth and the policy's belief (2σ ellipses, ``mor.lnet.figures.write_estimate_gif``),
+beside a top-down view of the truth and the policy's belief (2σ ellipses, ``mor.lnet.figures.write_estimate_gif``;
+for an L-Net tracker that keeps the looks, the search belief of the objects not found yet shaded on the floor),
 annotated with what the policy does: the targets, the running skill and its object, the action, the held object,
 and at the end why the episode ended."""
 
@@ -8,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.lines import Line2D
@@ -27,6 +29,8 @@ _JITTER = 1e-6  # m²: the ground truth's zero covariances drawn as points
 _LEGEND = [Line2D([], [], marker="*", color="black", linestyle="", label="truth (agent, objects)"),
            Line2D([], [], marker="o", color="grey", linestyle="", label="belief: mean and 2σ"),
            Line2D([], [], marker="X", color="black", linestyle="", markerfacecolor="white", label="target")]
+_SEARCH_LEGEND = Line2D([], [], marker="s", color=plt.get_cmap("Purples")(0.7), linestyle="",
+                        label="search belief (not found yet)")
 
 
 def _tril(covariance: np.ndarray) -> np.ndarray:
@@ -61,9 +65,13 @@ class _Recorder:
             "images", "poses", "objects", "agent_mean", "agent_tril", "heading", "kappa", "object_mean",
             "object_tril")}
         self.captions: list[str] = []
+        self.search: list[np.ndarray | None] = []  # per step the search belief's density (M,) per m², or None
 
     def __call__(self, hierarchy: SkillHierarchy) -> None:
         slot, belief = hierarchy.slots[0], hierarchy.belief
+        density = getattr(hierarchy.tracker, "search_density", None)
+        searching = belief.object_found is not None and not belief.object_found[0].all()
+        self.search.append(density[0] if density is not None and searching else None)
         state = slot.env.unwrapped.state
         self.frames["images"].append(slot.observation["image"])
         self.frames["poses"].append(state.agent_pose.copy())
@@ -110,13 +118,21 @@ def write_policy_video(path: Path, sim: SimConfig, tracker: BatchTracker, skills
         estimate = {key: np.stack(frames[key]) for key in ("agent_mean", "agent_tril", "heading", "kappa",
                                                            "object_mean", "object_tril")}
 
+        grid = getattr(tracker, "search_grid", None)
+        peak = max((float(d.max()) for d in record.search if d is not None), default=0.0)
+
         def annotate(ax: Axes, t: int) -> None:
+            density = record.search[t]
+            if density is not None and peak > 0:  # one colour scale over the episode: darker, more likely there
+                ax.scatter(*grid.T, c=density, cmap="Purples", vmin=0.0, vmax=peak, marker="s", s=6,
+                           alpha=0.6, linewidths=0, zorder=0)
             for k, target in enumerate(layout.target_positions):
                 ax.plot(*target, "X", color=object_class(int(layout.object_classes[k])).rgb, markeredgecolor="black",
                         markersize=8, zorder=6)
             ax.set_title("", loc="center")
             ax.set_title(record.captions[t], fontsize=7, loc="left")
-            ax.legend(handles=_LEGEND, fontsize=6, loc="lower left", framealpha=0.8)
+            handles = _LEGEND + ([_SEARCH_LEGEND] if grid is not None else [])
+            ax.legend(handles=handles, fontsize=6, loc="lower left", framealpha=0.8)
 
         write_estimate_gif(path, env.unwrapped.arena, truth, estimate, np.stack(frames["images"]), fps=fps,
                            annotate=annotate, progress="writing")

@@ -61,3 +61,40 @@ def test_the_caption_states_what_the_lnet_has_found_and_may_have_lost() -> None:
     stated = replace(truth, object_found=np.array([[1.0, 0.0, 1.0]], np.float32),
                      object_lost=np.array([[0.1, 0.2, 0.0]], np.float32))
     assert stated_caption(stated) == "\nL-Net: 0: found, lost 0.10; 1: searching; 2: found"
+
+
+class _Searching(RenderingTruthTracker):
+    """The truth's tracker that also states a search belief (uniform over the arena grid), every object still
+    searched (or, ``found``, none): what an L-Net tracker keeping the looks gives the video."""
+
+    def __init__(self, arena: Arena, found: bool) -> None:
+        super().__init__()
+        self.found = found
+        from mor.lnet.lost import arena_grid  # noqa: PLC0415
+
+        self.search_grid = arena_grid(arena)
+        self.search_density: np.ndarray | None = None
+
+    def observe(self, *args, **kwargs):  # noqa: ANN002, ANN003, ANN201
+        from dataclasses import replace  # noqa: PLC0415
+
+        belief = super().observe(*args, **kwargs)
+        self.search_density = np.ones((1, len(self.search_grid)))
+        return replace(belief, object_found=np.full((1, belief.n_objects), float(self.found), np.float32))
+
+
+def test_the_video_shades_the_search_belief_where_the_tracker_states_one(tmp_path: Path) -> None:
+    method = METHODS["baseline_img"]
+    sim = sim_of(method, SIM)
+    arena = Arena.build(sim.arena, sim.arena_size)
+    skills = {"pick": _skill("pick", "baseline_img", sim), "drop": _skill("drop", "baseline_img", sim)}
+    frames = {}
+    for name, tracker in (("found", _Searching(arena, True)), ("searching", _Searching(arena, False))):
+        out = tmp_path / f"{name}.gif"
+        write_policy_video(out, sim, tracker, skills, decider(method, None, arena), method_inputs(method), seed=5,
+                           horizon=3)
+        frames[name] = iio.imread(out, index=None)
+    assert frames["found"].shape == frames["searching"].shape
+    # the same legend and captions but for "found"/"searching": the shaded floor differs on most of the top view
+    changed = np.any(frames["found"] != frames["searching"], axis=-1).mean(axis=(1, 2))
+    assert np.all(changed > 0.05), changed

@@ -23,7 +23,7 @@ from mor.policy.belief import PoseBelief
 from mor.policy.envs import make_policy_env, make_task_env, variant_sim
 from mor.policy.features import feature_names, observation_vector
 from mor.policy.names import TASKS
-from mor.policy.variants import VARIANTS
+from mor.policy.variants import POSE_VARIANTS, VARIANTS
 from mor.policy.lnet_tracking import LNetTracker, LNetVecObservation
 from mor.policy.observations import GroundTruthTracker
 from mor.sim.arena import Arena
@@ -147,14 +147,18 @@ def _policy_envs() -> dict[str, Callable[[], gym.Env]]:
     """Every policy environment ``mor.policy.envs`` makes: each variant's Pick and Drop (the L-Net's through a tiny
     untrained L-Net), the decision's over untrained skills, and each baseline's."""
     envs: dict[str, Callable[[], gym.Env]] = {}
-    trackers = {"gt_pose": (GroundTruthTracker, True), "lnet": (lambda: LNetTracker(_runner()), True),
-                "lnet_no_uncertainty": (lambda: LNetTracker(_runner()), False)}
-    for variant, (tracker, uncertainty) in trackers.items():
+    arena = Arena.build(SIM.arena, SIM.arena_size)
+    trackers = {"gt_pose": (GroundTruthTracker, True, False), "lnet": (lambda: LNetTracker(_runner()), True, False),
+                "lnet_no_uncertainty": (lambda: LNetTracker(_runner()), False, False),
+                "lnet_search": (lambda: LNetTracker(_runner(), arena), True, True)}
+    assert set(trackers) == set(POSE_VARIANTS)
+    for variant, (tracker, uncertainty, search) in trackers.items():
         for task in ("pick", "drop"):
-            envs[f"{variant}-{task}"] = lambda t=task, m=tracker, u=uncertainty: make_policy_env(t, SIM, m(), u)
+            envs[f"{variant}-{task}"] = lambda t=task, m=tracker, u=uncertainty, s=search: make_policy_env(
+                t, SIM, m(), u, search=s)
         if uncertainty:
-            envs[f"{variant}-decision"] = lambda m=tracker: make_policy_env(
-                "decision", SIM, m(), True, (_EndingSkill(Action.PICK), _EndingSkill(Action.DROP)))
+            envs[f"{variant}-decision"] = lambda m=tracker, s=search: make_policy_env(
+                "decision", SIM, m(), True, (_EndingSkill(Action.PICK), _EndingSkill(Action.DROP)), search=s)
     for variant in (v for v in VARIANTS.values() if v.is_baseline):
         for task in ("pick", "drop"):
             envs[f"{variant.name}-{task}"] = lambda t=task, v=variant: BaselineObservation(
