@@ -21,9 +21,12 @@ app.add_typer(policy_app, name="policy")
 app.add_typer(eval_app, name="eval")
 
 
+VariantOption = Annotated[str, typer.Option("--variant", "-v", help=f"One of {', '.join(VARIANTS)}.")]
+
+
 @policy_app.command("train")
 def policy_train(
-    variant: Annotated[str, typer.Option("--variant", "-v", help=f"One of {', '.join(VARIANTS)}.")],
+    variant: VariantOption,
     task: Annotated[list[str] | None, typer.Option("--task", "-t", help="pick, drop, decision (repeat; default: all, "
                                                                          "in that order).")] = None,
     seed: Annotated[str | None, typer.Option("--seed", help="Training seed(s), e.g. 0 or 0,1,2 (default: the "
@@ -137,6 +140,32 @@ def eval_run(
                        held_out=held_out is not None)
     summary = ", ".join(f"{k} {v['mean']:.3f} ± {v['std']:.3f}" for k, v in row["metrics"].items())
     typer.echo(f"{method}: {summary}")
+
+
+@eval_app.command("probe-pick")
+def eval_probe_pick(
+    variant: VariantOption,
+    training_seed: Annotated[int, typer.Option(min=0, help="The training run whose Pick skill to probe.")] = 0,
+    episodes: Annotated[int, typer.Option(min=1, help="Pick episodes to play.")] = 100,
+    seed: Annotated[int, typer.Option(min=0, help="Reset seed of the first episode (then +1 each).")] = 1000,
+    out: Annotated[Path | None, typer.Option(help="JSON to write (default: datasets/eval/probe_pick_<variant>"
+                                                   ".seed_<S>.json).")] = None,
+    profile: ProfileOption = None,
+    params: ParamsOption = DEFAULT_PARAMS,
+) -> None:
+    """Where a Pick skill goes wrong: per step, whether the target (or another object) was within PICK's reach, in
+    view, or out of view, and the skill's PICK probability there (mor.eval.pick_probe)."""
+    from pipelines.evaluate import pick_probe  # noqa: PLC0415
+    from pipelines.io import write_json  # noqa: PLC0415
+
+    result = pick_probe(load_profile(profile, params), _variant(variant).name, training_seed, episodes, seed)
+    typer.echo(f"success {result['success']:.3f}, target ever in reach {result['target_ever_in_reach']:.3f}, "
+               f"median closest approach {result['median_closest_m']:.2f} m")
+    for name, probability in result["pick_probability"].items():
+        typer.echo(f"  {name}: {result['steps'][name]} steps, mean P(PICK) "
+                   + ("-" if probability is None else f"{probability:.4f}"))
+    path = out or paths.EVAL / f"probe_pick_{variant}.seed_{training_seed}.json"
+    typer.echo(f"wrote {write_json(path, result)}")
 
 
 @eval_app.command("results")

@@ -95,6 +95,33 @@ def policy_video(profile: Profile, method_name: str, seed: int, out: Path) -> di
                               method_inputs(method), seed, horizon=profile.evaluate.horizon)
 
 
+def pick_probe(profile: Profile, variant_name: str, training_seed: int, episodes: int, seed: int) -> dict[str, Any]:
+    """``mor.eval.pick_probe.probe_pick`` of the committed Pick skill that ``variant_name`` plays (its run with
+    ``training_seed``), in a Pick env with that skill's observation."""
+    from mor.eval.pick_probe import probe_pick  # noqa: PLC0415
+    from mor.policy.baselines import BaselineObservation  # noqa: PLC0415
+    from mor.policy.envs import make_policy_env, make_task_env  # noqa: PLC0415
+    from mor.policy.observations import GroundTruthTracker, SingleTracker  # noqa: PLC0415
+
+    method = method_spec(variant_name)
+    if method.variant is None:
+        raise ConfigError(f"--variant: {variant_name!r} has no Pick skill to probe; choose a trained variant")
+    loaded, sim = load_method(method, workspace_record(Path("."), profile), profile, training_seed=training_seed), \
+        sim_of(method, profile.sim)
+    variant = method.skill_owners()["pick"]
+    if variant.is_baseline:
+        env = BaselineObservation(make_task_env("pick", sim, render_frames=True), variant.baseline_input)
+    else:
+        tracker = GroundTruthTracker() if variant.source == "truth" else SingleTracker(loaded.tracker_factory(1))
+        env = make_policy_env("pick", sim, tracker, variant.uncertainty, search=variant.search)
+    try:
+        result = probe_pick(env, loaded.policies.pick, episodes, seed)
+    finally:
+        env.close()
+    return {"variant": variant_name, "pick_from": variant.name, "training_seed": training_seed,
+            "policy": loaded.played_by()["policies"]["pick"], **result}
+
+
 def collect_results(profile_name: str) -> Path:
     """Merge every row in ``cards/results/rows/`` (and each setting's, ``settings/*/cards/results/rows/``) of this
     profile into ``cards/results/results.json`` (``mor.eval.results.gather_rows``, each marked ``stale`` or not),

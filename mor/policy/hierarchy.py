@@ -67,13 +67,18 @@ class Skill:
         """vector (D,), mask (A,) -> one action."""
         return int(self.act_batch(vector[None], mask[None], None if rng is None else [rng])[0])
 
-    def act_batch(self, vectors: np.ndarray, masks: np.ndarray, rngs: list[np.random.Generator] | None = None
-                  ) -> np.ndarray:
-        """vectors (k, D) (or a dict of (k, ...) arrays), masks (k, A) bool -> actions (k,): one forward pass."""
+    def probabilities(self, vectors: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        """vectors (k, D) (or a dict of (k, ...) arrays), masks (k, A) bool -> (k, A) float64 the policy's action
+        probabilities (0 where masked): one forward pass."""
         observations, _ = self.policy.obs_to_tensor(vectors)
         with torch.no_grad():
             distribution = self.policy.get_distribution(observations, action_masks=masks)
-        probabilities = distribution.distribution.probs.cpu().numpy().astype(np.float64)
+        return distribution.distribution.probs.cpu().numpy().astype(np.float64)
+
+    def act_batch(self, vectors: np.ndarray, masks: np.ndarray, rngs: list[np.random.Generator] | None = None
+                  ) -> np.ndarray:
+        """vectors (k, D) (or a dict of (k, ...) arrays), masks (k, A) bool -> actions (k,): one forward pass."""
+        probabilities = self.probabilities(vectors, masks)
         if self.deterministic or rngs is None:
             return probabilities.argmax(-1)
         return np.array([rng.choice(len(p), p=p / p.sum()) for p, rng in zip(probabilities, rngs, strict=True)])
