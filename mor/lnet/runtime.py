@@ -74,6 +74,12 @@ class LNetRunner:
         self.checkpoint_digest = checkpoint_digest
         self.device = torch.device(device)
 
+    def __deepcopy__(self, memo: dict[int, Any]) -> LNetRunner:
+        """The runner itself: its weights and calibration are read-only while it tracks, and every tracker keeps
+        its own state, so a copied tracker (Gymnasium records a wrapper's arguments by deep copy) shares it (a
+        compiled network cannot be deep-copied)."""
+        return self
+
     @property
     def identity(self) -> str:
         """What a policy trained through this L-Net records (``lnet_version``): ``lnet_identity``."""
@@ -92,7 +98,8 @@ class LNetRunner:
         """The state of ``n_envs`` environments that all start an episode."""
         if n_envs < 1:
             raise ValueError(f"n_envs: must be at least 1 (got {n_envs})")
-        return StreamState(n_envs, self.model.initial_state(n_envs, self.device))
+        with torch.no_grad():  # inference: the learned priors enter the state as plain values
+            return StreamState(n_envs, self.model.initial_state(n_envs, self.device))
 
     def reset(self, state: StreamState, done: np.ndarray) -> StreamState:
         """``state`` with the environments where ``done`` (N,) bool is True back at an episode's start."""

@@ -338,3 +338,16 @@ def test_data_association_in_a_profile_needs_the_filter_tracker() -> None:
     with pytest.raises(ValueError, match="data_association: needs model.tracker: filter"):
         LNetParams(data_association=True)
     assert LNetParams(model=LNetConfig(tracker="filter"), data_association=True).data_association
+
+
+def test_copies_of_a_streaming_tracker_share_the_runner_and_keep_their_own_state() -> None:
+    """Gymnasium records a wrapper's arguments by deep copy (PoseObservation's tracker): the filter's learned priors
+    must not reach the state with a graph attached, and the runner (a compiled one cannot be copied) is shared."""
+    import copy  # noqa: PLC0415
+
+    from mor.lnet.streaming import StreamingTracker  # noqa: PLC0415
+
+    runner = _runner(config=SMALL.model_copy(update={"tracker": "filter", "visibility": True}))
+    stream = StreamingTracker(runner, 2)
+    copied = copy.deepcopy(stream)
+    assert copied.runner is runner and copied.state is not stream.state
