@@ -221,10 +221,16 @@ def eval_tables(
 
 
 @eval_app.command("cards")
-def eval_cards(profile: ProfileOption = None, params: ParamsOption = DEFAULT_PARAMS) -> None:
+def eval_cards(
+    variant: Annotated[list[str] | None, typer.Option("--variant", "-v", help="Only these variants (repeat; "
+                                                      "default: every trained one).")] = None,
+    profile: ProfileOption = None,
+    params: ParamsOption = DEFAULT_PARAMS,
+) -> None:
     """Write a policy card and an episode video for every trained variant (cards/policy/<variant>/)."""
     from pipelines import evaluate  # noqa: PLC0415
 
+    chosen = [_variant(v).name for v in variant] if variant else None
     name = active_profile(profile, params)
-    for path in evaluate.write_policy_cards(load_profile(name, params), name):
+    for path in evaluate.write_policy_cards(load_profile(name, params), name, chosen):
         typer.echo(f"wrote {path}")

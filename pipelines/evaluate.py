@@ -176,13 +176,15 @@ def localisation(workspaces: dict[str, Workspace]) -> dict[str, dict[str, Any]]:
     return found
 
 
-def write_policy_cards(profile: Profile, profile_name: str, video_seed: int = 0) -> list[Path]:
-    """``cards/policy/<variant>/README.md`` and ``episode.mp4`` for every variant with trained policies; each card
-    shows this workspace's rows that played those policies (a zero-shot row played the main workspace's)."""
+def write_policy_cards(profile: Profile, profile_name: str, variants: list[str] | None = None,
+                       video_seed: int = 0) -> list[Path]:
+    """``cards/policy/<variant>/README.md`` and ``episode.mp4`` for every variant of ``variants`` (None: all) with
+    trained policies; each card shows this workspace's rows that played those policies (a zero-shot row played the
+    main workspace's)."""
     rows = [row for row in (json.loads(p.read_text()) for p in sorted((paths.RESULTS_CARD / "rows").glob("*.json")))
             if row.get("profile") == profile_name and not is_zero_shot(row)]
     written = []
-    for variant in POSE_VARIANTS:
+    for variant in (v for v in POSE_VARIANTS if variants is None or v in variants):
         folder = paths.POLICY_CARD / variant
         summaries = {task: json.loads((folder / task / "summary.json").read_text()) for task in TASKS
                      if (folder / task / "summary.json").is_file()}

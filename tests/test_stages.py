@@ -129,6 +129,8 @@ def test_data_and_lnet_stages_in_order(workspace: Path) -> None:
     assert "Table 2" in _run("eval", "tables", "--table", "2")
     missing = CliRunner().invoke(app, ["eval", "tables", "--table", "1"])
     assert missing.exit_code == 2 and "mor eval run --method gt_pose_nearest_rule" in missing.output
+    assert "wrote cards/policy/lnet/README.md" in _run("eval", "cards", "--variant", "lnet", "--profile", "tiny")
+    assert not (workspace / "cards/policy/gt_pose/README.md").exists()  # only the variant asked for
     _run("eval", "cards", "--profile", "tiny")
     for variant in ("gt_pose", "lnet", "lnet_no_uncertainty"):
         assert (workspace / f"cards/policy/{variant}/episode.mp4").stat().st_size > 0
