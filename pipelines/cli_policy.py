@@ -148,7 +148,7 @@ def eval_probe_pick(
     training_seed: Annotated[int, typer.Option(min=0, help="The training run whose Pick skill to probe.")] = 0,
     episodes: Annotated[int, typer.Option(min=1, help="Pick episodes to play.")] = 100,
     seed: Annotated[int, typer.Option(min=0, help="Reset seed of the first episode (then +1 each).")] = 1000,
-    out: Annotated[Path | None, typer.Option(help="JSON to write (default: datasets/eval/probe_pick_<variant>"
+    out: Annotated[Path | None, typer.Option(help="JSON to write (default: cards/results/pick_probe/<variant>"
                                                    ".seed_<S>.json).")] = None,
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
@@ -164,7 +164,7 @@ def eval_probe_pick(
     for name, probability in result["pick_probability"].items():
         typer.echo(f"  {name}: {result['steps'][name]} steps, mean P(PICK) "
                    + ("-" if probability is None else f"{probability:.4f}"))
-    path = out or paths.EVAL / f"probe_pick_{variant}.seed_{training_seed}.json"
+    path = out or paths.RESULTS_CARD / "pick_probe" / f"{variant}.seed_{training_seed}.json"
     typer.echo(f"wrote {write_json(path, result)}")
 
 

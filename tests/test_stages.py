@@ -199,7 +199,7 @@ def test_baseline_stages_train_evaluate_and_fill_table_1(workspace: Path) -> Non
         out = workspace / f"{variant}.gif"
         assert f"wrote {out}" in _run("sim", "video", "--policy", variant, "--profile", "tiny", "--out", str(out))
     probed = _run("eval", "probe-pick", "--variant", "baseline_landmark", "--episodes", "2", "--profile", "tiny")
-    probe = json.loads((workspace / "datasets/eval/probe_pick_baseline_landmark.seed_0.json").read_text())
+    probe = json.loads((workspace / "cards/results/pick_probe/baseline_landmark.seed_0.json").read_text())
     assert probe["pick_from"] == "baseline_img" and probe["episodes"] == 2 and "mean P(PICK)" in probed
     _run("eval", "run", "--method", "baseline_landmark", "--profile", "tiny")
     protocol = tiny["evaluate"]
