@@ -135,7 +135,7 @@ def collect_results(profile_name: str) -> Path:
     path = paths.RESULTS_CARD / "results.json"
     resamples = profiles["."].evaluate.bootstrap_resamples
     rows = gather_rows({name: Path(name) / paths.RESULTS_CARD / "rows" for name in workspaces}, profile_name,
-                       json.loads(path.read_text()) if path.is_file() else None, resamples)
+                       resamples)
     identity = cache(_identity)  # this call's: a card changed since an earlier call is read again
     rows = [{**row, "stale": stale_row(row, workspaces[row["workspace"]], lambda card, row=row: identity(
         card, profiles[row["workspace"]].lnet.encoder_precision))} for row in rows]

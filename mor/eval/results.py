@@ -32,11 +32,9 @@ def row_key(row: dict[str, Any]) -> tuple:
     return tuple(row.get(key) for key in ROW_KEYS)
 
 
-def merge_rows(existing: list[dict[str, Any]], new: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """``existing`` with each row of ``new`` replacing the row of the same key (or added), in a stable order."""
-    merged = {row_key(row): row for row in existing}
-    merged.update({row_key(row): row for row in new})
-    return sorted(merged.values(), key=lambda row: tuple(str(v) for v in row_key(row)))
+def in_row_order(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``rows`` in a stable order: by ``row_key``."""
+    return sorted(rows, key=lambda row: tuple(str(v) for v in row_key(row)))
 
 
 def repoint_policy_digests(row: dict[str, Any], renamed: dict[str, str]) -> bool:
@@ -48,16 +46,13 @@ def repoint_policy_digests(row: dict[str, Any], renamed: dict[str, str]) -> bool
     return bool(changed)
 
 
-def gather_rows(rows_folders: dict[str, Path], profile_name: str, existing: dict[str, Any] | None = None,
-                resamples: int = 10_000) -> list[dict[str, Any]]:
-    """The rows of profile ``profile_name``: those of ``existing`` (an earlier results.json, kept where no row
-    replaces it; ignored when it is another profile's), replaced by the ``*.json`` rows in ``rows_folders``
+def gather_rows(rows_folders: dict[str, Path], profile_name: str, resamples: int = 10_000) -> list[dict[str, Any]]:
+    """The rows of profile ``profile_name``, from the row files alone: the ``*.json`` rows in ``rows_folders``
     (workspace name -> its ``cards/results/rows`` folder; each training run's, ``aggregate_runs``), each marked
-    with the ``workspace`` it was evaluated in."""
+    with the ``workspace`` it was evaluated in, in ``in_row_order``. A row whose file is gone is gone."""
     found = [{**json.loads(path.read_text()), "workspace": workspace}
              for workspace, folder in rows_folders.items() for path in sorted(folder.glob("*.json"))]
-    kept = existing["rows"] if existing and existing.get("profile") == profile_name else []
-    return merge_rows(kept, aggregate_runs([row for row in found if row.get("profile") == profile_name], resamples))
+    return in_row_order(aggregate_runs([row for row in found if row.get("profile") == profile_name], resamples))
 
 
 def stale_row(row: dict[str, Any], workspace: Workspace, lnet_identity: Callable[[Path], str]) -> bool:

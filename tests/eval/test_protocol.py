@@ -11,7 +11,7 @@ import pytest
 from mor.errors import ConfigError
 from mor.eval.methods import LoadedMethod, method_spec
 from mor.eval.protocol import metric_summaries, read_records, run_protocol
-from mor.eval.results import merge_rows
+from mor.eval.results import gather_rows
 from mor.eval.stats import summarize
 from mor.sim.config import SimConfig
 
@@ -106,9 +106,13 @@ def test_records_are_sealed_with_what_played_them(tmp_path: Path) -> None:
         read_records(path)
 
 
-def test_rows_are_replaced_by_key_and_kept_in_order() -> None:
-    old = [{"method": "lnet", "encoder": None, "arena": "square", "policy_arena": "square", "n_objects": 3, "v": 1}]
-    new = [{"method": "lnet", "encoder": None, "arena": "square", "policy_arena": "square", "n_objects": 3, "v": 2},
-           {"method": "gt_pose", "encoder": None, "arena": "square", "policy_arena": "square", "n_objects": 3, "v": 3}]
-    merged = merge_rows(old, new)
-    assert [(r["method"], r["v"]) for r in merged] == [("gt_pose", 3), ("lnet", 2)]
+def test_the_results_are_the_row_files_alone_in_order(tmp_path: Path) -> None:
+    row = {"encoder": None, "arena": "square", "policy_arena": "square", "n_objects": 3, "profile": "tiny"}
+    folder = tmp_path / "rows"
+    folder.mkdir()
+    for method in ("lnet", "gt_pose"):
+        (folder / f"{method}.json").write_text(json.dumps({**row, "method": method}))
+    (folder / "oracle.json").write_text(json.dumps({**row, "method": "oracle", "profile": "default"}))
+    assert [r["method"] for r in gather_rows({".": folder}, "tiny")] == ["gt_pose", "lnet"]  # the profile's, sorted
+    (folder / "lnet.json").unlink()
+    assert [r["method"] for r in gather_rows({".": folder}, "tiny")] == ["gt_pose"]  # a row whose file is gone
