@@ -5,7 +5,7 @@ Each step of a Pick episode falls in one of ``STEP_CLASSES``, judged from the si
 what PICK would take now): the target within PICK's reach and in view, another object so, the target in view but
 beyond reach, or the target out of view. A skill that has learned Pick PICKs in the first class and not in the
 others; one that never PICKs (its PICK probability near 0 everywhere), or PICKs as often wherever it is, has not.
-The probe plays the skill as the protocol does (actions drawn from its distribution, one generator per episode).
+The probe plays the skill as the protocol does (``Skill.choose``: one generator per episode).
 """
 
 from __future__ import annotations
@@ -59,7 +59,7 @@ def probe_pick(env: gym.Env, skill: Skill, episodes: int, seed: int) -> dict[str
             ever |= name == STEP_CLASSES[0]
             probabilities = skill.probabilities(_batch(observation), env.action_masks()[None])[0]
             pick[name].append(float(probabilities[Action.PICK]))
-            action = int(rng.choice(len(probabilities), p=probabilities / probabilities.sum()))
+            action = int(skill.choose(probabilities[None], [rng])[0])
             observation, _, terminated, truncated, info = env.step(action)
             done = terminated or truncated
         successes.append(bool(info["metrics"]["success"]))

@@ -78,7 +78,10 @@ class Skill:
     def act_batch(self, vectors: np.ndarray, masks: np.ndarray, rngs: list[np.random.Generator] | None = None
                   ) -> np.ndarray:
         """vectors (k, D) (or a dict of (k, ...) arrays), masks (k, A) bool -> actions (k,): one forward pass."""
-        probabilities = self.probabilities(vectors, masks)
+        return self.choose(self.probabilities(vectors, masks), rngs)
+
+    def choose(self, probabilities: np.ndarray, rngs: list[np.random.Generator] | None = None) -> np.ndarray:
+        """(k, A) action probabilities (``probabilities``) -> actions (k,), as ``act_batch`` acts on them."""
         if self.deterministic or rngs is None:
             return probabilities.argmax(-1)
         return np.array([rng.choice(len(p), p=p / p.sum()) for p, rng in zip(probabilities, rngs, strict=True)])

@@ -6,16 +6,19 @@ import numpy as np
 
 from mor.eval.pick_probe import STEP_CLASSES, probe_pick, step_class
 from mor.policy.envs import make_task_env
+from mor.policy.hierarchy import Skill
 from mor.sim.config import SimConfig
 from mor.sim.rules import Action, N_ACTIONS
 
 SIM = SimConfig(n_objects=2, image_size=16)
 
 
-class _Fixed:
-    """A skill with the same action probabilities everywhere: PICK with probability ``pick``, else turning left."""
+class _Fixed(Skill):
+    """A skill with the same action probabilities everywhere: PICK with probability ``pick``, else turning left
+    (drawn, as the protocol plays skills)."""
 
     def __init__(self, pick: float) -> None:
+        super().__init__(None, deterministic=False)
         self.pick = pick
 
     def probabilities(self, vectors: np.ndarray, masks: np.ndarray) -> np.ndarray:
