@@ -16,7 +16,7 @@ import time
 from typing import Any
 
 from mor.config import Profile
-from mor.lnet.calibration_file import check_scales
+from mor.lnet.calibration_file import check_scales, chosen_calibration
 from mor.lnet.calibration_fit import CRITERIA, calibrate, criterion_name, tracked_calibration
 from mor.lnet.evaluate import calibrated_metrics, headline, metrics
 from mor.lnet.filter import TrackingSettings
@@ -46,15 +46,16 @@ def _calibrate(profile: Profile) -> dict[str, Any]:
     lost = profile.lnet.calibration.lost_objects
     arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
     rules = (not chosen, chosen) if runner.config.tracker == "filter" else (chosen,)  # the chosen one last: kept
+    settings = chosen_calibration(profile.lnet.chosen_settings()).stated  # the stated belief's chosen settings
     fits = {}
     for rule in rules:
         runner.model.use_tracking(TrackingSettings(data_association=rule, gate=profile.lnet.gate))
-        fits[rule] = calibrate(runner.model, episodes, criterion, arena if lost else None, profile.lnet.not_found_sigma)
+        fits[rule] = calibrate(runner.model, episodes, criterion, arena if lost else None, settings)
     predictions, calibration, tried, inputs = fits[chosen]
     check_scales(calibration, paths.LNET_CALIBRATION)
     after = {rule: calibrated_metrics(p, fitted, rule_inputs) for rule, (p, fitted, _, rule_inputs) in fits.items()}
     # for the criteria with lost probabilities (and search)
-    inputs = inputs or stated_inputs(predictions, arena, profile.lnet.not_found_sigma)
+    inputs = inputs or stated_inputs(predictions, arena, settings)
     name = criterion_name(criterion, lost)
     by_criterion = {criterion_name(other, with_lost): calibration if criterion_name(other, with_lost) == name else
                     tracked_calibration(runner.model, predictions, other, inputs if with_lost else None)

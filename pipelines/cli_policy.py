@@ -62,14 +62,19 @@ def policy_plan(
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
-    """Print what `mor policy train` will run for each variant: each task's steps, start point and PPO parameters,
-    after the setting's overrides and policy.lnet_steps."""
+    """Print what `mor policy train` will run for each variant: its observation (policy.observation), each task's
+    steps, start point and PPO parameters, after the setting's overrides and policy.lnet_steps."""
     from pipelines import train_policy  # noqa: PLC0415
 
     config = load_profile(profile, params)
     for name in variant or list(config.policy.variants):
         typer.echo(f"{name}:")
-        for task_plan in train_policy.plan(config, _variant(name), seed=config.policy.training_seeds[0]):
+        chosen = _variant(name)
+        if not chosen.is_baseline:
+            settings = config.policy.observation.model_dump()
+            typer.echo(f"  observation: uncertainty {chosen.uncertainty}, search {chosen.search}, "
+                       + ", ".join(f"{key} {value}" for key, value in settings.items()))
+        for task_plan in train_policy.plan(config, chosen, seed=config.policy.training_seeds[0]):
             ppo = task_plan.params.model_dump()
             steps = ppo.pop("steps")
             typer.echo(f"  {task_plan.task}: {steps:,} steps, {task_plan.why}"
@@ -193,7 +198,7 @@ def bench_policy_command(
 
     config = load_profile(profile, params)
     runner = committed_lnet(workspace_record(Path("."), config), OURS, config.lnet)
-    result = bench_policy(config.sim, config.policy.pick, runner, seconds, repeats)
+    result = bench_policy(config.sim, config.policy.pick, config.policy.observation, runner, seconds, repeats)
     typer.echo(", ".join(f"{k} {v:.0f} steps/s" for k, v in result["steps_per_second"].items()))
     typer.echo(f"wrote {write_json(out, result)}")
 

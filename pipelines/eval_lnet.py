@@ -49,8 +49,8 @@ def _write_card(profile: Profile, card: Path) -> dict[str, Any]:
     manifest = read_manifest(paths.MANIFEST)
     predictions = predict(runner.model, paths.LEROBOT / "test", profile.lnet.eval_episodes, runner.device)
     arena = Arena.build(profile.sim.arena, profile.sim.arena_size)
-    sigma = calibration.stated.not_found_sigma
-    inputs = stated_inputs(predictions, arena, sigma)  # the objects' stated belief (mor.lnet.lost, mor.lnet.search)
+    settings = calibration.stated  # its chosen settings: the not-found width, the look cap, the grid's spacing
+    inputs = stated_inputs(predictions, arena, settings)  # the objects' stated belief (mor.lnet.lost, mor.lnet.search)
 
     def scored(p: Predictions, p_inputs: StatedInputs) -> dict[str, Any]:
         return {"before_calibration": metrics(p), "after_calibration": calibrated_metrics(p, calibration, p_inputs)}
@@ -64,7 +64,7 @@ def _write_card(profile: Profile, card: Path) -> dict[str, Any]:
     runner.model.use_encoder_precision(chosen)
     result["encoder_precision"] = {chosen: headline(result["after_calibration"]),
                                    other: headline(calibrated_metrics(reduced, calibration,
-                                                                      stated_inputs(reduced, arena, sigma)))}
+                                                                      stated_inputs(reduced, arena, settings)))}
     criteria = {name: calibration_from_values(values)  # each criterion's scales, on the test split
                 for name, values in read_json(paths.LNET_CALIBRATION).get("criteria", {}).items()}
     result["calibration_criteria"] = {name: headline(result["after_calibration"] if fitted == calibration else
@@ -76,7 +76,7 @@ def _write_card(profile: Profile, card: Path) -> dict[str, Any]:
     result["real"] = scored(predictions.select(real), inputs.select(real)) if real.any() else None
     if profile.lnet.oracle_episodes:  # the episodes the policies will produce: oracle-driven, tracked live
         live = predict_live(runner, profile.sim, "oracle", profile.lnet.oracle_episodes, ORACLE_SEED)
-        result["oracle"] = {"seed": ORACLE_SEED, **scored(live, stated_inputs(live, arena, sigma))}
+        result["oracle"] = {"seed": ORACLE_SEED, **scored(live, stated_inputs(live, arena, settings))}
     result["seconds"] = round(time.perf_counter() - started, 1)  # the metrics; the figures below are not counted
     write_json(card / "metrics.json", result)
 

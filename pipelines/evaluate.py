@@ -91,8 +91,9 @@ def policy_video(profile: Profile, method_name: str, seed: int, out: Path) -> di
     loaded = load_method(method, workspace_record(Path("."), profile), profile)
     policies, arena = loaded.policies, Arena.build(profile.sim.arena, profile.sim.arena_size)
     return write_policy_video(out, sim_of(method, profile.sim), loaded.tracker_factory(1, looks=True),
-                              {"pick": policies.pick, "drop": policies.drop}, decider(method, policies, arena),
-                              method_inputs(method), seed, horizon=profile.evaluate.horizon)
+                              {"pick": policies.pick, "drop": policies.drop},
+                              decider(method, policies, arena, loaded.features), method_inputs(method, loaded.features),
+                              seed, horizon=profile.evaluate.horizon)
 
 
 def pick_probe(profile: Profile, variant_name: str, training_seed: int, episodes: int, seed: int) -> dict[str, Any]:
@@ -101,6 +102,7 @@ def pick_probe(profile: Profile, variant_name: str, training_seed: int, episodes
     from mor.eval.pick_probe import probe_pick  # noqa: PLC0415
     from mor.policy.baselines import BaselineObservation  # noqa: PLC0415
     from mor.policy.envs import make_policy_env, make_task_env  # noqa: PLC0415
+    from mor.policy.features import ObservationLayout  # noqa: PLC0415
     from mor.policy.observations import GroundTruthTracker, SingleTracker  # noqa: PLC0415
 
     method = method_spec(variant_name)
@@ -113,7 +115,7 @@ def pick_probe(profile: Profile, variant_name: str, training_seed: int, episodes
         env = BaselineObservation(make_task_env("pick", sim, render_frames=True), variant.baseline_input)
     else:
         tracker = GroundTruthTracker() if variant.source == "truth" else SingleTracker(loaded.tracker_factory(1))
-        env = make_policy_env("pick", sim, tracker, variant.uncertainty, search=variant.search)
+        env = make_policy_env("pick", sim, tracker, ObservationLayout.of(variant, loaded.features))
     try:
         result = probe_pick(env, loaded.policies.pick, episodes, seed)
     finally:

@@ -87,10 +87,11 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
             skills = tuple(Skill.load(policy_folder(paths.POLICY_CARD, variant.name, name, seed) / POLICY_FILE,
                                       policy.skills_deterministic) for name in ("pick", "drop"))
         signature = (PolicySignature.of_baseline(task, variant, sim.n_objects, sim.arena, sim.image_size)
-                     if variant.is_baseline else PolicySignature.of(task, variant, sim.n_objects, sim.arena, version))
+                     if variant.is_baseline else PolicySignature.of(task, variant, sim.n_objects, sim.arena, version,
+                                                                   policy.observation))
         run_dir = policy_folder(paths.POLICIES, variant.name, task, seed)
         summary = train_policy(
-            lambda: make_training_env(task, variant, sim, params, runner, skills),  # noqa: B023
+            lambda: make_training_env(task, variant, sim, params, policy.observation, runner, skills),  # noqa: B023
             params, signature, run_dir, seed, f"{variant.name} {task}" + (f" seed {seed}" if seed else ""),
             progress, init_from, policy_kwargs=baseline_extractor(policy.baseline) if variant.is_baseline else None)
         publish(run_dir, policy_folder(paths.POLICY_CARD, variant.name, task, seed))

@@ -46,6 +46,8 @@ def assert_one_line(error: BaseException, *names: str) -> str:
         ({"arena_size": 1000.0}, "arena_size"),
         ({"landmarks": True}, "landmarks"),  # unknown keyword (a typo of landmark)
         ({"colour": "red"}, "colour"),
+        ({"rewards": {"success": -1.0}}, "rewards.success"),
+        ({"rewards": {"bonus": 1.0}}, "rewards.bonus"),
     ],
 )
 def test_bad_env_keywords_fail_at_construction(env_id, kwargs, field) -> None:
@@ -158,6 +160,9 @@ def _with(section: str, key: str, value) -> str:
         ("demo", "task", "fly", "demo.task"),
         ("demo", "fps", 0, "demo.fps"),
         ("demo", "policy", "ppo", "demo.policy"),
+        ("sim", "rewards", {"step": -0.01}, "sim.rewards.step"),
+        ("lnet", "search_max_looks", 0, "lnet.search_max_looks"),
+        ("lnet", "arena_grid_spacing", 0.0, "lnet.arena_grid_spacing"),
     ],
 )
 def test_bad_params_name_the_file_and_field(tmp_path: Path, section, key, value, field) -> None:

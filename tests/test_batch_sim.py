@@ -80,11 +80,13 @@ def test_shorter_than_answers_as_the_blas_norm_also_at_the_bound() -> None:
 
 
 @pytest.mark.parametrize(
-    ("task", "shape", "n_objects", "horizon"),
-    [("pick", "square", 3, None), ("drop", "square", 3, 12), ("pick", "polygon", 5, 12), ("drop", "polygon", 1, None)],
+    ("task", "shape", "n_objects", "horizon", "rewards"),
+    [("pick", "square", 3, None, {}), ("drop", "square", 3, 12, {"success": 5.0, "collision": 2.0}),
+     ("pick", "polygon", 5, 12, {"success": 5.0, "collision": 2.0}), ("drop", "polygon", 1, None, {})],
 )
-def test_task_batch_plays_the_envs_episodes_exactly(task, shape, n_objects, horizon) -> None:
-    sim = SimConfig(arena=shape, n_objects=n_objects)
+def test_task_batch_plays_the_envs_episodes_exactly(task, shape, n_objects, horizon, rewards) -> None:
+    """The batch pays ``sim.rewards`` as the env does (the defaults, or others)."""
+    sim = SimConfig(arena=shape, n_objects=n_objects, rewards=rewards)
     n_envs, seeds = 6, [11 * i + 3 for i in range(6)]
     envs = [gym.make(ENV_IDS[task], render_frames=False, horizon=horizon, **sim.model_dump()).unwrapped
             for _ in range(n_envs)]

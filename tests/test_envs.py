@@ -376,8 +376,10 @@ def test_pick_terminates_on_any_pick(place, make_env) -> None:
     assert info["metrics"] == {"success": 0.0}
 
 
-def test_pick_reward_constructed_case(place, make_env) -> None:
-    env = make_env("pick")
+@pytest.mark.parametrize(("rewards", "paid"), [({}, 10.0), ({"rewards": {"success": 5.0}}, 5.0)])
+def test_pick_reward_constructed_case(place, make_env, rewards, paid) -> None:
+    """The paper's weights by default; ``rewards`` (``SimConfig.rewards``, a gym.make keyword) changes them."""
+    env = make_env("pick", **rewards)
     env.reset(seed=0)
     goal = env.unwrapped.goal_object
     objects = np.array([(2.0, 2.0), (-2.0, 2.0), (-2.0, -2.0)])
@@ -393,10 +395,10 @@ def test_pick_reward_constructed_case(place, make_env) -> None:
     _, reward, *_ = env.step(int(Action.TURN_LEFT))
     assert reward == 0.0
     place(env, (info["agent_pose"][0], 0.0, 0.0))
-    # PICK the goal: +10, no distance change
+    # PICK the goal: +10 (the success reward), no distance change
     _, reward, terminated, _, info = env.step(int(Action.PICK))
     assert info["picked"] == goal and info["held"] == goal
-    assert terminated and reward == pytest.approx(10.0)
+    assert terminated and reward == pytest.approx(paid)
     assert info["metrics"] == {"success": 1.0}
 
 
@@ -414,8 +416,9 @@ def test_pick_of_the_wrong_object_ends_without_success(place, make_env) -> None:
     assert terminated and reward == 0.0 and info["metrics"]["success"] == 0.0
 
 
-def test_pick_collision_reward(place, make_env) -> None:
-    env = make_env("pick")
+@pytest.mark.parametrize(("rewards", "paid"), [({}, -1.0), ({"rewards": {"collision": 2.5}}, -2.5)])
+def test_pick_collision_reward(place, make_env, rewards, paid) -> None:
+    env = make_env("pick", **rewards)
     env.reset(seed=0)
     goal = env.unwrapped.goal_object
     objects = np.array([(2.0, 2.0), (-2.0, 2.0), (-2.0, -2.0)])
@@ -423,7 +426,7 @@ def test_pick_collision_reward(place, make_env) -> None:
     place(env, (3.0 - AGENT_RADIUS - 0.005, 0.0, 0.0), objects)  # nose to the east wall
     _, reward, terminated, truncated, info = env.step(int(Action.MOVE))
     assert info["obstructed"] and terminated and not truncated
-    assert reward == pytest.approx(-1.0)  # no progress, minus the collision
+    assert reward == pytest.approx(paid)  # no progress, minus the collision
     assert info["metrics"] == {"success": 0.0}
 
 
@@ -570,13 +573,14 @@ def test_rearrange_does_not_end_while_holding(place, make_env) -> None:
     assert info["metrics"]["success"] == 1.0 and info["metrics"]["fixed_strict"] == 1.0
 
 
-def test_rearrange_collision(place, make_env) -> None:
-    env = make_env("rearrange")
+@pytest.mark.parametrize(("rewards", "paid"), [({}, -1.01), ({"rewards": {"collision": 2.0, "step": 0.5}}, -2.5)])
+def test_rearrange_collision(place, make_env, rewards, paid) -> None:
+    env = make_env("rearrange", **rewards)
     env.reset(seed=0)
     place(env, (-3.0 + AGENT_RADIUS + 0.005, 0.0, np.pi), [(2.0, 2.0), (-2.0, 2.0), (-2.0, -2.0)])
     _, reward, terminated, _, info = env.step(int(Action.MOVE))
     assert info["obstructed"] and terminated
-    assert reward == pytest.approx(-1.01)
+    assert reward == pytest.approx(paid)  # the step penalty and the collision
     assert set(info["metrics"]) == {"success", "fixed_strict", "energy_remaining"}
 
 

@@ -39,8 +39,10 @@ class CollectionSpec:
     fps: float
 
     def params(self) -> dict[str, Any]:
-        return {"sim": self.sim.model_dump(), "exploration": self.exploration.model_dump(), "seed": self.seed,
-                "episode_steps": self.episode_steps, "fps": self.fps, "env_id": ENV_ID}
+        """What an episode file records of its making. Not the sim's rewards: the exploration policy never reads
+        them, so they shape no frame (and data collected before they were parameters keeps its version)."""
+        return {"sim": self.sim.model_dump(exclude={"rewards"}), "exploration": self.exploration.model_dump(),
+                "seed": self.seed, "episode_steps": self.episode_steps, "fps": self.fps, "env_id": ENV_ID}
 
 
 def _json(value: Any) -> Any:

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any, Literal
 from mor.errors import ConfigError
 from mor.policy.hierarchy import POLICY_FILE, Skill
 from mor.policy.names import TASKS, Task
+from mor.policy.params import ObservationParams
 from mor.policy.signature import ZERO_SHOT_FIELDS, PolicySignature, check_signature
 from mor.policy.variants import VARIANTS, Variant, policy_folder
 from mor.policy.workspace import Workspace, committed_lnet
@@ -87,14 +88,16 @@ class TrainedPolicies:
 class LoadedMethod:
     """A method ready to play: its policies (None for the scripted ones), a factory of trackers for n envs at once
     (``looks=True``: an L-Net tracker also keeps the search belief's looks, for pictures, whether or not the policy
-    reads them), the L-Net it observes through and that L-Net's identity (None without one), and the committed
-    folder of each policy."""
+    reads them), the L-Net it observes through and that L-Net's identity (None without one), the committed
+    folder of each policy, and the observation settings its pose policies were checked against (the profile's
+    ``policy.observation``)."""
 
     method: Method
     policies: TrainedPolicies | None = None
     tracker_factory: Callable[..., BatchTracker] | None = None
     lnet: LNetRunner | None = None
     folders: dict[Task, Path] = field(default_factory=dict)
+    features: ObservationParams = field(default_factory=ObservationParams)
 
     @property
     def lnet_version(self) -> str | None:
@@ -141,7 +144,7 @@ def load_method(method: Method, workspace: Workspace, profile: Profile, zero_sho
         return LoadedMethod(method)
     from mor.policy.observations import GroundTruthBatchTracker, RenderingTruthTracker  # noqa: PLC0415
 
-    sim, deterministic = profile.sim, profile.policy.skills_deterministic
+    sim, deterministic, features = profile.sim, profile.policy.skills_deterministic, profile.policy.observation
     folders = policy_folders(method, policy_root(workspace, zero_shot), training_seed)
     runner = committed_lnet(workspace, method.variant, profile.lnet)
     version = runner.identity if runner is not None else None
@@ -150,7 +153,8 @@ def load_method(method: Method, workspace: Workspace, profile: Profile, zero_sho
     for task, folder in folders.items():
         owner = method.skill_owners()[task]
         expected = (PolicySignature.of_baseline(task, owner, sim.n_objects, sim.arena, sim.image_size)
-                    if owner.is_baseline else PolicySignature.of(task, owner, sim.n_objects, sim.arena, version))
+                    if owner.is_baseline else PolicySignature.of(task, owner, sim.n_objects, sim.arena, version,
+                                                                 features))
         check_signature(folder / "meta.json", expected, allow)
         skills[task] = Skill.load(folder / POLICY_FILE, deterministic)
     policies = TrainedPolicies(skills["pick"], skills["drop"], skills["decision"])
@@ -160,6 +164,6 @@ def load_method(method: Method, workspace: Workspace, profile: Profile, zero_sho
         arena, search = Arena.build(sim.arena, sim.arena_size), method.variant.search
         return LoadedMethod(method, policies,
                             lambda n, looks=False: LNetBatchTracker(runner, n, arena if search or looks else None),
-                            runner, folders)
+                            runner, folders, features)
     tracker = RenderingTruthTracker if method.is_baseline else GroundTruthBatchTracker
-    return LoadedMethod(method, policies, lambda n, looks=False: tracker(), None, folders)
+    return LoadedMethod(method, policies, lambda n, looks=False: tracker(), None, folders, features)

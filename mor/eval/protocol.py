@@ -24,8 +24,9 @@ from mor.eval.stats import summarize
 from mor.policy.belief import PoseBelief
 from mor.policy.baselines import baseline_inputs
 from mor.policy.envs import make_task_env, variant_sim
-from mor.policy.features import Encode, observation_vector, pose_inputs
+from mor.policy.features import Encode, ObservationLayout, observation_vector, pose_inputs
 from mor.policy.hierarchy import decision_mask, nearest_unfixed
+from mor.policy.params import ObservationParams
 from mor.policy.workspace import Workspace
 from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
@@ -35,28 +36,30 @@ if TYPE_CHECKING:
     from mor.config import Profile
 
 
-def decider(method: Method, policies: TrainedPolicies, arena: Arena) -> Decide:
-    """The method's decision for k envs at once: its learned decision policy, the nearest-unfixed rule, or (the
-    baselines, which hold no pose estimate) the object after the previous decision's, in index order."""
+def decider(method: Method, policies: TrainedPolicies, arena: Arena, features: ObservationParams) -> Decide:
+    """The method's decision for k envs at once: its learned decision policy (reading its variant's layout with
+    the profile's ``policy.observation`` settings, ``features``), the nearest-unfixed rule, or (the baselines,
+    which hold no pose estimate) the object after the previous decision's, in index order."""
     if method.decision == "nearest_rule":
         return lambda belief, held, targets, last: np.array(
             [nearest_unfixed(belief.take(k), targets[k]) for k in range(len(held))])
     if method.decision == "object_order":
         return lambda belief, held, targets, last: (last + 1) % targets.shape[1]
-    uncertainty, search = method.variant.uncertainty, method.variant.search
+    layout = ObservationLayout.of(method.variant, features)
 
     def learned(belief: PoseBelief, held: np.ndarray, targets: np.ndarray, last: np.ndarray) -> np.ndarray:
-        vectors = observation_vector(belief, held, "decision", targets, uncertainty, arena, search)
+        vectors = observation_vector(belief, held, "decision", targets, layout, arena)
         return policies.decision.act_batch(vectors, decision_mask(belief.object_mean, targets))
 
     return learned
 
 
-def method_inputs(method: Method) -> Encode:
-    """What a learned method's skills read: a baseline's pixels and goal, or the pose layout of its variant."""
+def method_inputs(method: Method, features: ObservationParams) -> Encode:
+    """What a learned method's skills read: a baseline's pixels and goal, or the pose layout of its variant (with
+    the profile's ``policy.observation`` settings, ``features``)."""
     if method.is_baseline:
         return baseline_inputs(method.variant)
-    return pose_inputs(method.variant.uncertainty, method.variant.search)
+    return pose_inputs(ObservationLayout.of(method.variant, features))
 
 
 def sim_of(method: Method, sim: SimConfig) -> SimConfig:
@@ -156,9 +159,9 @@ def _play(loaded: LoadedMethod, sim: SimConfig, todo: list[tuple[str, int, int]]
             continue
         n = min(n_envs, len(keys))
         skills = {"pick": policies.pick, "drop": policies.drop}
-        decide = decider(method, policies, Arena.build(sim.arena, sim.arena_size))
+        decide = decider(method, policies, Arena.build(sim.arena, sim.arena_size), loaded.features)
         yield from play_lockstep(task, keys, sim_of(method, sim), loaded.tracker_factory(n), skills, decide,
-                                 method_inputs(method), n, **env_kwargs)
+                                 method_inputs(method, loaded.features), n, **env_kwargs)
 
 
 #: this worker's loaded methods: each loads once per process (a pool worker or a Ray worker plays many jobs)

@@ -5,8 +5,8 @@ It holds three records, as flat JSON fields: the scales of the stated uncertaint
 ``agent_scale``, ``object_scale``, ``kappa_scale``, ``shared_colour_scale``), the tracking settings they were fitted
 with (``mor.lnet.filter.TrackingSettings``: ``data_association``, ``noise_own``, ``noise_shared``, ``gate``) and
 the stated belief's parameters (``mor.lnet.stated.StatedParams``: ``lost_own``, ``lost_shared``, ``search_find``,
-``not_found_sigma``). A file
-without some of them predates them and was fitted without them: they read as their defaults.
+and the chosen ``not_found_sigma``, ``search_max_looks``, ``arena_grid_spacing``). A file without some of them
+predates them and was fitted without them: they read as their defaults.
 """
 
 from __future__ import annotations
@@ -44,9 +44,10 @@ class FittedCalibration:
 
 def recorded_settings(fitted: FittedCalibration) -> dict[str, Any]:
     """The tracking-time settings a run chooses in its profile (``LNetParams.chosen_settings``: the tracking rule,
-    the filter's gate, the not-found width) that ``fitted`` was fitted with."""
+    the filter's gate, and the stated belief's ``StatedParams.CHOSEN``: the not-found width, the search belief's
+    look cap, the arena grid's spacing) that ``fitted`` was fitted with."""
     return {"data_association": fitted.tracking.data_association, "gate": fitted.tracking.gate,
-            "not_found_sigma": fitted.stated.not_found_sigma}
+            **{name: getattr(fitted.stated, name) for name in StatedParams.CHOSEN}}
 
 
 def chosen_calibration(chosen: dict[str, Any], tracking: TrackingSettings | None = None,
@@ -57,7 +58,7 @@ def chosen_calibration(chosen: dict[str, Any], tracking: TrackingSettings | None
     tracking, stated = tracking or TrackingSettings(), stated or StatedParams()
     return FittedCalibration(
         tracking=replace(tracking, **{key: chosen[key] for key in ("data_association", "gate") if key in chosen}),
-        stated=replace(stated, **{key: chosen[key] for key in ("not_found_sigma",) if key in chosen}))
+        stated=replace(stated, **{key: chosen[key] for key in StatedParams.CHOSEN if key in chosen}))
 
 
 def _optional(value: Any) -> float | None:
@@ -70,6 +71,9 @@ def calibration_from_values(values: dict[str, Any]) -> FittedCalibration:
     data_association = values.get("data_association", False)
     if not isinstance(data_association, bool):
         raise TypeError(f"data_association must be true or false, got {data_association!r}")
+    max_looks = values.get("search_max_looks", StatedParams.search_max_looks)
+    if isinstance(max_looks, bool) or not isinstance(max_looks, int):
+        raise TypeError(f"search_max_looks must be an integer, got {max_looks!r}")
     return FittedCalibration(
         Calibration(*(float(values[key]) for key in ("agent_scale", "object_scale", "kappa_scale")),
                     shared_colour_scale=_optional(values.get("shared_colour_scale"))),
@@ -77,7 +81,9 @@ def calibration_from_values(values: dict[str, Any]) -> FittedCalibration:
                          float(values.get("noise_shared", 1.0)), float(values.get("gate", TrackingSettings.gate))),
         StatedParams(float(values.get("lost_own", 0.0)), _optional(values.get("lost_shared")),
                      _optional(values.get("search_find")),
-                     float(values.get("not_found_sigma", StatedParams.not_found_sigma))))
+                     float(values.get("not_found_sigma", StatedParams.not_found_sigma)),
+                     max_looks,
+                     float(values.get("arena_grid_spacing", StatedParams.arena_grid_spacing))))
 
 
 def read_calibration(path: Path, dataset_version: str | None = None) -> FittedCalibration:

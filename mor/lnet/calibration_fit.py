@@ -161,11 +161,11 @@ def fit_calibration(predictions: Predictions, criterion: str = "nll", inputs: St
     if own is None:  # every object shares its colour: one group
         own, shared = shared or (1.0, 0.0), None
     heading = kappa_scale(wrap_angle(p.agent_pose[:, 2] - p.heading), np.asarray(p.kappa, np.float64))
+    stated = StatedParams(own[1], shared[1] if inputs is not None and shared else None,
+                          None if inputs is None else _search_fit(criterion, inputs.looks, inputs.not_found))
     return FittedCalibration(
         Calibration(scale(agent_d2) or 1.0, own[0], heading, shared_colour_scale=shared and shared[0]),
-        stated=StatedParams(own[1], shared[1] if inputs is not None and shared else None,
-                            None if inputs is None else _search_fit(criterion, inputs.looks, inputs.not_found),
-                            **({} if inputs is None else {"not_found_sigma": inputs.not_found_sigma})))
+        stated=stated if inputs is None else stated.chosen_from(inputs.settings))
 
 
 #: The measurement-noise multipliers ``fit_measurement_noise`` chooses from: powers of two, 1/64 to 64.
@@ -202,18 +202,21 @@ def fit_measurement_noise(model: LNet, episodes: list[tuple[PoseEstimate, dict[s
 
 
 def calibrate(model: LNet, episodes: list[tuple[PoseEstimate, dict[str, torch.Tensor]]], criterion: str = "nll",
-              arena: Arena | None = None, not_found_sigma: float = StatedParams.not_found_sigma
+              arena: Arena | None = None, settings: StatedParams | None = None
               ) -> tuple[Predictions, FittedCalibration, dict[str, float], StatedInputs | None]:
     """Calibrate ``model`` (with its current tracking rule) on validation episodes (``frame_estimates``): the
     filter's measurement noise (``fit_measurement_noise``), then the scales (``fit_calibration`` by
-    ``criterion``; with ``arena``, also the objects' lost probabilities and search belief, beliefs wider than
-    ``not_found_sigma`` metres searched). Returns the
-    uncalibrated predictions with the chosen noise, the calibration (recording the rule and the noise), the noise
-    search's tries and the predictions' ``StatedInputs`` (None without ``arena``)."""
+    ``criterion``; with ``arena``, also the objects' lost probabilities and search belief, made with the chosen
+    settings of ``settings``, ``StatedParams.CHOSEN``: None, the defaults). Returns the uncalibrated predictions
+    with the chosen noise, the calibration (recording the rule, the noise and ``settings``' chosen settings, with
+    ``arena`` or without), the noise search's tries and the predictions' ``StatedInputs`` (None without
+    ``arena``)."""
+    settings = settings or StatedParams()
     _, tried = fit_measurement_noise(model, episodes)
     predictions = track_episodes(model, episodes)
-    inputs = None if arena is None else stated_inputs(predictions, arena, not_found_sigma)
-    return predictions, tracked_calibration(model, predictions, criterion, inputs), tried, inputs
+    inputs = None if arena is None else stated_inputs(predictions, arena, settings)
+    fitted = tracked_calibration(model, predictions, criterion, inputs)
+    return predictions, replace(fitted, stated=fitted.stated.chosen_from(settings)), tried, inputs
 
 
 def tracked_calibration(model: LNet, predictions: Predictions, criterion: str, inputs: StatedInputs | None = None

@@ -279,8 +279,11 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
                   "probability as `Estimates.object_lost`). The other object rows are its Gaussian alone.", ""]
     if calibration.get("search_find") is not None:
         share = after.get("stated", {}).get("searching_share", {})
-        lines += ["An object whose belief has not found it yet (wider than 1 m) is stated by the search belief "
-                  "instead: more likely where the estimated camera cone has not pointed, each look finding the "
+        from mor.lnet.stated import StatedParams  # noqa: PLC0415 - the card module is torch-free elsewhere
+
+        wider = calibration.get("not_found_sigma", StatedParams.not_found_sigma)  # absent: the default it used
+        lines += [f"An object whose belief has not found it yet (wider than {wider:g} m) is stated by the search "
+                  "belief instead: more likely where the estimated camera cone has not pointed, each look finding the "
                   f"object with probability {calibration['search_find']:.2f} (`mor/lnet/search.py`; the streaming "
                   "step marks those beliefs, `Estimates.object_searching`, and `SearchMap` keeps the looks in a "
                   "running loop). Beliefs stated by it on the test split: "

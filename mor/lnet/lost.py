@@ -30,8 +30,6 @@ import numpy as np
 from mor.sim.arena import Arena
 from mor.sim.geometry import point_in_polygon
 
-#: Spacing (m) of the grid of arena points ``arena_shares`` counts: 3,600 points in a 6 m square.
-GRID_SPACING = 0.1
 _EM_ITERATIONS = 300
 _CHUNK = 1024
 
@@ -49,8 +47,9 @@ class ArenaShares:
         return ArenaShares(self.area, self.share[rows])
 
 
-def arena_grid(arena: Arena, spacing: float = GRID_SPACING) -> np.ndarray:
-    """(M, 2) the centres of the cells of a square grid (side ``spacing``, m) that lie inside ``arena``."""
+def arena_grid(arena: Arena, spacing: float) -> np.ndarray:
+    """(M, 2) the centres (m) of the cells of a square grid (side ``spacing``, m; ``StatedParams.arena_grid_spacing``,
+    0.1 m by default: 3,600 points in a 6 m square) that lie inside ``arena``."""
     low, high = arena.bounds
     xs, ys = (np.arange(lo + spacing / 2, hi, spacing) for lo, hi in zip(low, high, strict=True))
     points = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
@@ -65,11 +64,11 @@ def _squared_distance(points: np.ndarray, mean: np.ndarray, tril: np.ndarray) ->
     return z0 * z0 + z1 * z1
 
 
-def arena_shares(truth: np.ndarray, mean: np.ndarray, tril: np.ndarray, rows: np.ndarray, arena: Arena
-                 ) -> ArenaShares:
-    """``ArenaShares`` of Gaussians (mean (N, K, 2), tril (N, K, 2, 2), any scale) and the truth (N, K, 2),
-    computed where ``rows`` (N, K) is True."""
-    grid = arena_grid(arena)
+def arena_shares(truth: np.ndarray, mean: np.ndarray, tril: np.ndarray, rows: np.ndarray, arena: Arena,
+                 spacing: float) -> ArenaShares:
+    """``ArenaShares`` of Gaussians (mean (N, K, 2) m, tril (N, K, 2, 2), any scale) and the truth (N, K, 2) m,
+    computed where ``rows`` (N, K) is True, counting the points of the arena grid of ``spacing`` metres."""
+    grid = arena_grid(arena, spacing)
     index = np.flatnonzero(rows)
     flat = lambda a: a.reshape(-1, *a.shape[2:])[index].astype(np.float64)  # noqa: E731
     truth, mean, tril = flat(truth), flat(mean), flat(tril)

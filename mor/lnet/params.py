@@ -103,11 +103,19 @@ class LNetParams(ParamsModel):
     not_found_sigma: float = Field(1.0, gt=0, description="metres: a belief wider than this (geometric mean of its "
                                    "standard deviations, uncalibrated) has not found its object, and its stated "
                                    "belief is the search belief (mor.lnet.stated); recorded by mor calibrate-lnet")
+    search_max_looks: int = Field(64, ge=1, description="the search belief counts a grid point looked at more often "
+                                  "than this as looked at this many times ((1 - q)^64 < 0.002 for the find "
+                                  "probabilities q above 0.1 the fit can choose; mor.lnet.search); recorded by mor "
+                                  "calibrate-lnet")
+    arena_grid_spacing: float = Field(0.1, gt=0, description="metres: the spacing of the arena grid whose points the "
+                                      "lost belief's arena shares and the search belief count (3,600 points in a 6 m "
+                                      "square; mor.lnet.lost.arena_grid); recorded by mor calibrate-lnet")
 
     def chosen_settings(self) -> dict[str, Any]:
         """The tracking-time settings this profile chooses, which ``calibrate-lnet`` records and ``load_lnet`` checks
         against the calibration (``mor.lnet.calibration_file.recorded_settings``)."""
-        return {"data_association": self.data_association, "gate": self.gate, "not_found_sigma": self.not_found_sigma}
+        return {"data_association": self.data_association, "gate": self.gate, "not_found_sigma": self.not_found_sigma,
+                "search_max_looks": self.search_max_looks, "arena_grid_spacing": self.arena_grid_spacing}
 
     @model_validator(mode="after")
     def _association_needs_the_filter(self) -> LNetParams:

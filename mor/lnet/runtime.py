@@ -174,9 +174,10 @@ def load_lnet(path: Path, device: torch.device | str = "cpu", expected: dict[str
     config, dataset version or image size is one clear error naming both sides. calibrated=False: identity scales
     (what the calibration stage itself needs). compiled: the streaming step through ``torch.compile``.
     chosen: the run's tracking-time settings (``LNetParams.chosen_settings``: the tracking rule, the filter's gate,
-    the not-found width); None: those the calibration was fitted with (the defaults when
-    uncalibrated); one given with a calibration fitted with another value, one clear error. encoder_precision:
-    float32 or bfloat16 (``LNet.use_encoder_precision``), whichever the weights were trained with.
+    the not-found width, the search belief's look cap, the arena grid's spacing); None: those the calibration was
+    fitted with (the defaults when uncalibrated); one given with a calibration fitted with another value, one clear
+    error. encoder_precision: float32 or bfloat16 (``LNet.use_encoder_precision``), whichever the weights were
+    trained with.
     """
     path = Path(path)
     saved = load_checkpoint(path, expected or {}, device)

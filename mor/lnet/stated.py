@@ -10,7 +10,10 @@ Per object, from the tracker's Gaussian (before calibration) and the calibration
   sighting brings a belief to tenths of a metre);
 - for a belief not found yet, the search belief over where the camera has not looked (``mor.lnet.search``), each
   look finding the object with probability ``StatedParams.search_find`` (None: not fitted, such an object's stated
-  belief is its Gaussian too).
+  belief is its Gaussian too), look counts capped at ``StatedParams.search_max_looks`` (``lnet.search_max_looks``).
+
+The lost and search beliefs count points of the arena grid of ``StatedParams.arena_grid_spacing`` metres
+(``lnet.arena_grid_spacing``, ``mor.lnet.lost.arena_grid``).
 
 Its two consumers read it here: the streaming runner per step (``stated_estimates`` -> ``Estimates``, with the
 search density where the loop keeps the looks, ``mor.lnet.streaming``) and evaluation per frame of a set of
@@ -21,7 +24,8 @@ Shapes: N environments (or frames), n objects (K slots), M arena grid points. Po
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
+from typing import ClassVar
 
 import numpy as np
 import torch
@@ -38,20 +42,36 @@ class StatedParams:
     """The stated belief's fitted parameters (``mor.lnet.calibration_fit``, stored in ``calibration.json``): the
     probability that an object's belief is lost for objects of their own colour (``lost_own``) and confusable ones
     (``lost_shared``, None: the same as ``lost_own``), each in [0, 1); the probability in [0, 1] that one look finds
-    an object not found yet (``search_find``; None: no search belief); and, chosen not fitted
-    (``lnet.not_found_sigma``), the width (m, geometric mean of the standard deviations, uncalibrated) above which
-    a belief has not found its object."""
+    an object not found yet (``search_find``; None: no search belief); and, chosen not fitted (``CHOSEN``, each
+    ``lnet.<name>`` in the profile): the width (m, geometric mean of the standard deviations, uncalibrated) above
+    which a belief has not found its object (``not_found_sigma``), the look count above which the search belief
+    counts a point as looked at that many times (``search_max_looks``) and the spacing (m) of the arena grid the
+    lost and search beliefs count (``arena_grid_spacing``)."""
+
+    #: The fields a run chooses in its profile rather than the calibration fitting them.
+    CHOSEN: ClassVar[tuple[str, ...]] = ("not_found_sigma", "search_max_looks", "arena_grid_spacing")
 
     lost_own: float = 0.0
     lost_shared: float | None = None
     search_find: float | None = None
     not_found_sigma: float = 1.0
+    search_max_looks: int = 64
+    arena_grid_spacing: float = 0.1
 
     def lost(self, confusable_mask: np.ndarray) -> np.ndarray:
         """(..., K) float64 the probability that each object's belief is lost, by group: confusable_mask (..., K)
         bool (``mor.lnet.calibration.confusable``)."""
         shared = self.lost_own if self.lost_shared is None else self.lost_shared
         return np.where(np.asarray(confusable_mask), shared, self.lost_own)
+
+    def chosen_from(self, settings: StatedParams) -> StatedParams:
+        """These parameters with the chosen settings (``CHOSEN``) of ``settings``."""
+        return replace(self, **{name: getattr(settings, name) for name in self.CHOSEN})
+
+    def search_map(self, arena: Arena, n_envs: int) -> SearchMap:
+        """An empty ``SearchMap`` of ``n_envs`` environments in ``arena`` with these settings (the look cap and the
+        grid's spacing in metres)."""
+        return SearchMap(arena, n_envs, self.search_max_looks, self.arena_grid_spacing)
 
 
 def not_found(object_tril: np.ndarray, sigma: float) -> np.ndarray:
@@ -116,26 +136,30 @@ def stated_estimates(last: PoseEstimate, object_classes: np.ndarray, held: np.nd
 class StatedInputs:
     """What the objects' stated belief needs of a set of predictions beyond their Gaussians: the arena shares of
     the lost belief (``mor.lnet.lost``), the looks of the search belief (``mor.lnet.search``) and which beliefs
-    have not found their object (N, K), judged on the uncalibrated beliefs by ``not_found_sigma`` (m)."""
+    have not found their object (N, K), judged on the uncalibrated beliefs; made with the chosen settings of
+    ``settings`` (``StatedParams.CHOSEN``)."""
 
     shares: ArenaShares
     looks: SearchLooks
     not_found: np.ndarray
-    not_found_sigma: float
+    settings: StatedParams
 
     def select(self, rows: np.ndarray) -> StatedInputs:
         """The inputs of the frames ``rows`` (as ``Predictions.select``)."""
-        return StatedInputs(self.shares.select(rows), self.looks.select(rows), self.not_found[rows],
-                            self.not_found_sigma)
+        return replace(self, shares=self.shares.select(rows), looks=self.looks.select(rows),
+                       not_found=self.not_found[rows])
 
 
-def stated_inputs(predictions: Predictions, arena: Arena, not_found_sigma: float) -> StatedInputs:
-    """``StatedInputs`` of the present objects of ``predictions`` (uncalibrated: which beliefs are not found is
-    judged on their own width, against ``not_found_sigma`` metres)."""
-    p = predictions
-    return StatedInputs(arena_shares(p.object_truth, p.object_mean, p.object_tril, p.present, arena),
-                        search_looks(p.agent_mean, p.heading, p.object_truth, p.episode, arena),
-                        p.present & not_found(p.object_tril, not_found_sigma), not_found_sigma)
+def stated_inputs(predictions: Predictions, arena: Arena, settings: StatedParams) -> StatedInputs:
+    """``StatedInputs`` of the present objects of ``predictions`` with the chosen settings of ``settings`` (its
+    fitted fields are not read): which beliefs are not found is judged on their own uncalibrated width against
+    ``not_found_sigma`` metres, the arena grid has ``arena_grid_spacing`` metres between points, look counts are
+    capped at ``search_max_looks``."""
+    p, spacing = predictions, settings.arena_grid_spacing
+    return StatedInputs(arena_shares(p.object_truth, p.object_mean, p.object_tril, p.present, arena, spacing),
+                        search_looks(p.agent_mean, p.heading, p.object_truth, p.episode, arena,
+                                     settings.search_max_looks, spacing),
+                        p.present & not_found(p.object_tril, settings.not_found_sigma), settings)
 
 
 def stated_truth(d2: np.ndarray, half_log_det: np.ndarray, lost: np.ndarray, inputs: StatedInputs | None,

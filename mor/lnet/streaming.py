@@ -20,7 +20,6 @@ import numpy as np
 from mor.data.schema import NO_ACTION
 from mor.lnet.model import PoseEstimate
 from mor.lnet.runtime import LNetRunner
-from mor.lnet.search import SearchMap
 from mor.lnet.stated import Estimates
 from mor.sim.arena import Arena
 
@@ -37,13 +36,14 @@ def stack_frames(observations: list[dict[str, Any]]) -> Frames:
 
 class StreamingTracker:
     """N environments' episodes tracked by ``runner``: one forward pass per ``step``. With ``arena``, each
-    environment's looks of the arena grid are kept too (``mor.lnet.search.SearchMap``, from the estimated poses), so
-    the estimates carry the search belief's density (``Estimates.search_density``)."""
+    environment's looks of the arena grid are kept too (``mor.lnet.search.SearchMap``, from the estimated poses, with
+    the calibration's look cap and grid spacing), so the estimates carry the search belief's density
+    (``Estimates.search_density``)."""
 
     def __init__(self, runner: LNetRunner, n_envs: int, arena: Arena | None = None) -> None:
         self.runner = runner
         self.state = runner.initial_state(n_envs)
-        self.search = None if arena is None else SearchMap(arena, n_envs)
+        self.search = None if arena is None else runner.fitted.stated.search_map(arena, n_envs)
 
     def track(self, frames: Frames, previous_actions: np.ndarray, starting: np.ndarray) -> PoseEstimate:
         """One frame of each environment -> the model's world-frame estimate (N, 1, ...) of all K slots, before

@@ -29,7 +29,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 
 from mor.errors import ConfigError
 from mor.policy.belief import PoseBelief
-from mor.policy.features import observation_vector
+from mor.policy.features import ObservationLayout, observation_vector
 from mor.policy.names import Task
 from mor.policy.observations import observation_space
 from mor.sim.batch_tasks import TaskBatch
@@ -43,21 +43,21 @@ BATCHED_METHODS: tuple[str, ...] = ("action_masks",)
 
 
 class BatchedPoseVecEnv(VecEnv):
-    """``n_envs`` Pick or Drop episodes of ``sim``'s world observed through the ground truth (the truth's variant's
-    layout, with or without its zero ``uncertainty`` entries); see the module docstring.
+    """``n_envs`` Pick or Drop episodes of ``sim``'s world observed through the ground truth in ``layout`` (the
+    truth's variant's, with or without its zero uncertainty entries); see the module docstring.
 
-    observation (N, D) float32, ``feature_names(task, n, uncertainty)``; reward (N,) float32; done (N,) bool.
+    observation (N, D) float32, ``feature_names(task, n, layout)``; reward (N,) float32; done (N,) bool.
     """
 
-    def __init__(self, task: Task, sim: SimConfig, n_envs: int, uncertainty: bool = True,
+    def __init__(self, task: Task, sim: SimConfig, n_envs: int, layout: ObservationLayout = ObservationLayout(),
                  horizon: int | None = None) -> None:
         if task not in BATCHED_TASKS:
             raise ConfigError(f"task: {task!r} has no batched environment; choose pick or drop "
                               f"(vec_env: batched is for the ground truth's Pick and Drop)")
         self.batch = TaskBatch(task, n_envs, sim, horizon)
-        self.task, self.uncertainty = task, uncertainty
+        self.task, self.layout = task, layout
         self.render_mode = None  # read by VecEnv.__init__ through get_attr
-        super().__init__(self.batch.n_envs, observation_space(task, sim.n_objects, uncertainty),
+        super().__init__(self.batch.n_envs, observation_space(task, sim.n_objects, layout),
                          spaces.Discrete(N_ACTIONS))
         self._returns = np.zeros(self.num_envs)
         self._actions: NDArray[np.int64] | None = None
@@ -145,7 +145,7 @@ class BatchedPoseVecEnv(VecEnv):
 
     def _vectors(self, poses: np.ndarray, objects: np.ndarray, held: np.ndarray,
                  goal: np.ndarray) -> NDArray[np.float32]:
-        return observation_vector(PoseBelief.from_truth(poses, objects), held, self.task, goal, self.uncertainty,
+        return observation_vector(PoseBelief.from_truth(poses, objects), held, self.task, goal, self.layout,
                                   self.batch.arena)
 
     def _observe(self, rows: NDArray[np.int64]) -> NDArray[np.float32]:

@@ -8,12 +8,30 @@ layout built from it is in ``mor.policy.features``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 Float = NDArray[np.float32]
+
+
+@dataclass(frozen=True)
+class SearchBelief:
+    """Where N environments' unfound objects may be (``mor.lnet.search``), on one grid shared by all of them.
+
+    density (N, M) per m² at grid (M, 2) m, each point standing for cell_area m²; searching (N,) bool: the
+    environment still searches some object (the policy's view of it is all zero otherwise).
+    """
+
+    density: NDArray
+    grid: NDArray
+    cell_area: float
+    searching: NDArray
+
+    def take(self, index: NDArray) -> SearchBelief:
+        """The search belief of the environments ``index`` (the grid is shared)."""
+        return replace(self, density=self.density[index], searching=self.searching[index])
 
 
 @dataclass(frozen=True)
@@ -24,9 +42,8 @@ class PoseBelief:
     0 for the truth); object_mean (N, n, 2) (a held object sits at the agent); object_cov (N, n, 2, 2) m².
     The stated belief's parts (``mor.lnet.stated``; None where the source states none, as the truth):
     object_found (N, n) 1.0 where the belief has found its object, 0.0 where it is still the search belief;
-    object_lost (N, n) the probability that the object is not where its Gaussian says; search_sectors (N, S) the
-    search belief's mass in ``SEARCH_SECTORS`` bearing sectors x ``SEARCH_RINGS`` range rings around the agent
-    (``mor.policy.search_view``; all zero when nothing is searched).
+    object_lost (N, n) the probability that the object is not where its Gaussian says; search: where the objects
+    not found yet may be (``SearchBelief``; a policy reads it through ``mor.policy.search_view``).
     """
 
     agent_mean: Float
@@ -37,7 +54,7 @@ class PoseBelief:
     object_cov: Float
     object_found: Float | None = None
     object_lost: Float | None = None
-    search_sectors: Float | None = None
+    search: SearchBelief | None = None
 
     @property
     def n_envs(self) -> int:
@@ -66,4 +83,5 @@ class PoseBelief:
         """The belief of the environments ``index`` (an int keeps a batch of one)."""
         index = np.atleast_1d(index)
         return PoseBelief(*(None if getattr(self, name) is None else getattr(self, name)[index]
-                            for name in self.__dataclass_fields__))
+                            for name in self.__dataclass_fields__ if name != "search"),
+                          search=None if self.search is None else self.search.take(index))

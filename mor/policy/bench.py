@@ -21,7 +21,8 @@ from sb3_contrib import MaskablePPO
 from mor.lnet.runtime import LNetRunner
 from mor.policy.batched_env import BatchedPoseVecEnv
 from mor.policy.envs import make_training_env
-from mor.policy.params import PPOParams
+from mor.policy.features import ObservationLayout
+from mor.policy.params import ObservationParams, PPOParams
 from mor.policy.variants import GROUND_TRUTH, OURS
 from mor.sim.config import SimConfig
 
@@ -53,9 +54,10 @@ def _ppo_rate(env: Any, params: PPOParams, seconds: float) -> float:
     return rollouts * rollout / (time.perf_counter() - start)
 
 
-def bench_policy(sim: SimConfig, params: PPOParams, runner: LNetRunner, seconds: float, repeats: int = 3,
-                 progress: bool = True) -> dict[str, Any]:
-    """Steps/s of each path (``seconds`` each, ``repeats`` times; medians), all in this one process."""
+def bench_policy(sim: SimConfig, params: PPOParams, features: ObservationParams, runner: LNetRunner, seconds: float,
+                 repeats: int = 3, progress: bool = True) -> dict[str, Any]:
+    """Steps/s of each path (``seconds`` each, ``repeats`` times; medians), all in this one process; features: the
+    profile's ``policy.observation``."""
     torch.set_num_threads(1)
     rng = np.random.default_rng(0)
 
@@ -63,11 +65,11 @@ def bench_policy(sim: SimConfig, params: PPOParams, runner: LNetRunner, seconds:
         return params.model_copy(update={"vec_env": kind})
 
     truth = GROUND_TRUTH.name
-    envs = {truth: make_training_env("pick", GROUND_TRUTH, sim, with_vec_env("batched")),
-            f"{truth}_per_env": make_training_env("pick", GROUND_TRUTH, sim, with_vec_env("dummy")),
-            OURS.name: make_training_env("pick", OURS, sim, with_vec_env("dummy"), runner),
-            f"{OURS.name}_subproc": make_training_env("pick", OURS, sim, with_vec_env("subproc"), runner)}
-    wide = BatchedPoseVecEnv("pick", sim, BATCHED_N_ENVS, GROUND_TRUTH.uncertainty)
+    envs = {truth: make_training_env("pick", GROUND_TRUTH, sim, with_vec_env("batched"), features),
+            f"{truth}_per_env": make_training_env("pick", GROUND_TRUTH, sim, with_vec_env("dummy"), features),
+            OURS.name: make_training_env("pick", OURS, sim, with_vec_env("dummy"), features, runner),
+            f"{OURS.name}_subproc": make_training_env("pick", OURS, sim, with_vec_env("subproc"), features, runner)}
+    wide = BatchedPoseVecEnv("pick", sim, BATCHED_N_ENVS, ObservationLayout.of(GROUND_TRUTH, features))
     wide_key = f"env_{truth}_n{BATCHED_N_ENVS}"
     runs: dict[str, list[float]] = {f"{kind}_{name}": [] for kind in ("env", "ppo") for name in envs}
     runs[wide_key] = []

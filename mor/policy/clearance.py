@@ -4,6 +4,8 @@ belief and the fixed arena do not, but PPO learns obstruction-free driving from 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -12,20 +14,19 @@ from mor.sim.arena import Arena
 from mor.sim.catalog import OBJECT_RADIUS
 from mor.sim.rules import AGENT_RADIUS
 
-RAY_ANGLES = np.deg2rad([-60.0, -30.0, 0.0, 30.0, 60.0])  # left positive, from the heading
-MAX_CLEARANCE = 3.0  # metres: rays are cut here
 
-
-def clearance(belief: PoseBelief, held: NDArray, arena: Arena) -> NDArray[np.float32]:
-    """(N, len(RAY_ANGLES)) distance, metres, the agent's centre can travel along each ray before its disc
-    touches a wall or a floor object's disc (held objects are carried, not obstacles), capped at MAX_CLEARANCE.
+def clearance(belief: PoseBelief, held: NDArray, arena: Arena, rays_deg: Sequence[float], max_clearance: float
+              ) -> NDArray[np.float32]:
+    """(N, R) distance, metres, the agent's centre can travel along each of the R rays (``rays_deg``, degrees
+    from the heading, left positive) before its disc touches a wall or a floor object's disc (held objects are
+    carried, not obstacles), capped at ``max_clearance`` metres (``policy.observation`` in params.yaml).
 
     The arrays run (rays, walls or objects, N): the N environments innermost, so that each operation is one long
     loop however small the arena or the scene."""
     origin = belief.agent_mean.astype(np.float64).T[:, None, None]  # (2, 1, 1, N)
-    angles = belief.heading.astype(np.float64)[None] + RAY_ANGLES[:, None]  # (R, N)
+    angles = belief.heading.astype(np.float64)[None] + np.deg2rad(np.asarray(rays_deg, np.float64))[:, None]  # (R, N)
     direction = np.stack([np.cos(angles), np.sin(angles)])[:, :, None]  # (2, R, 1, N)
-    distance = np.minimum(_to_walls(origin, direction, arena) - AGENT_RADIUS, MAX_CLEARANCE)  # (R, N)
+    distance = np.minimum(_to_walls(origin, direction, arena) - AGENT_RADIUS, max_clearance)  # (R, N)
     floor = np.arange(belief.n_objects)[:, None] != np.asarray(held, int)[None]  # (n, N)
     offset = belief.object_mean.astype(np.float64).transpose(2, 1, 0)[:, None] - origin  # (2, 1, n, N) agent -> object
     along = direction[0] * offset[0] + direction[1] * offset[1]  # (R, n, N) along each ray

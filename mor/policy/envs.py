@@ -9,10 +9,11 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 
 from mor.errors import ConfigError
 from mor.policy.batched_env import BATCHED_TASKS, BatchedPoseVecEnv
+from mor.policy.features import ObservationLayout
 from mor.policy.hierarchy import HierarchicalRearrange, Skill
 from mor.policy.names import PLAYS, Task, WorldTask
 from mor.policy.observations import GroundTruthTracker, PoseObservation, SingleTracker
-from mor.policy.params import PPOParams
+from mor.policy.params import ObservationParams, PPOParams
 from mor.policy.variants import Variant
 from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
@@ -32,28 +33,29 @@ def make_task_env(task: WorldTask, sim: SimConfig, render_frames: bool, **kwargs
 
 
 def make_policy_env(
-    task: Task, sim: SimConfig, tracker: SingleTracker, uncertainty: bool, skills: tuple[Skill, Skill] | None = None,
-    search: bool = False, **env_kwargs: object,
+    task: Task, sim: SimConfig, tracker: SingleTracker, layout: ObservationLayout,
+    skills: tuple[Skill, Skill] | None = None, **env_kwargs: object,
 ) -> gym.Env:
-    """One environment with the policy's observation vector: a ``PoseObservation`` of Pick/Drop, or, for the
-    decision, the ``HierarchicalRearrange`` semi-MDP over the frozen ``skills`` (pick, drop). Frames are rendered
-    only when the tracker reads them (never for the ground truth); ``env_kwargs`` go to the MOR env. search: the
-    vector holds the stated belief's parts (``mor.policy.features``; the tracker must keep the search looks)."""
+    """One environment with the policy's observation vector in ``layout``: a ``PoseObservation`` of Pick/Drop, or,
+    for the decision, the ``HierarchicalRearrange`` semi-MDP over the frozen ``skills`` (pick, drop). Frames are
+    rendered only when the tracker reads them (never for the ground truth); ``env_kwargs`` go to the MOR env. A
+    layout with the stated belief (``layout.search``) needs a tracker that keeps the search looks."""
     if task not in PLAYS:
         raise ConfigError(f"task: {task!r} is not a policy; choose one of {', '.join(PLAYS)}")
     env = make_task_env(PLAYS[task], sim, not isinstance(tracker, GroundTruthTracker), **env_kwargs)
     if task == "decision":
         if skills is None:
             raise ValueError("the decision policy's environment needs the trained pick and drop skills")
-        return HierarchicalRearrange(env, tracker.batch, *skills, uncertainty, search=search)
-    return PoseObservation(env, tracker, uncertainty, search)
+        return HierarchicalRearrange(env, tracker.batch, *skills, layout)
+    return PoseObservation(env, tracker, layout)
 
 
 def make_training_env(
-    task: Task, variant: Variant, sim: SimConfig, params: PPOParams, runner: LNetRunner | None = None,
-    skills: tuple[Skill, Skill] | None = None,
+    task: Task, variant: Variant, sim: SimConfig, params: PPOParams, features: ObservationParams,
+    runner: LNetRunner | None = None, skills: tuple[Skill, Skill] | None = None,
 ) -> VecEnv:
-    """``params.n_envs`` environments of ``task`` with ``variant``'s observation, for SB3.
+    """``params.n_envs`` environments of ``task`` with ``variant``'s observation (a pose variant's layout with the
+    profile's ``policy.observation`` settings, ``features``), for SB3.
 
     A baseline: rendered Pick or Drop envs seen through ``BaselineObservation`` (``variant_sim``'s world). The truth's
     variant: ``PoseObservation`` envs without rendering. L-Net variants: for Pick/Drop rendered envs under
@@ -65,21 +67,20 @@ def make_training_env(
 
     if variant.is_baseline:
         return _baseline_training_env(task, variant, sim, params)
-    uncertainty = variant.uncertainty
+    layout = ObservationLayout.of(variant, features)
     vec_env = SubprocVecEnv if params.vec_env == "subproc" else DummyVecEnv
     if variant.source == "truth":
         if params.vec_env == "batched" and task in BATCHED_TASKS:
-            return BatchedPoseVecEnv(task, sim, params.n_envs, uncertainty)
-        return vec_env([lambda: make_policy_env(task, sim, GroundTruthTracker(), uncertainty, skills)] * params.n_envs)
+            return BatchedPoseVecEnv(task, sim, params.n_envs, layout)
+        return vec_env([lambda: make_policy_env(task, sim, GroundTruthTracker(), layout, skills)] * params.n_envs)
     if runner is None:
         raise ValueError(f"variant {variant.name!r} needs the trained L-Net (runner)")
-    search = variant.search
     if task == "decision":
-        arena = Arena.build(sim.arena, sim.arena_size) if search else None
-        return DummyVecEnv([lambda: make_policy_env(task, sim, LNetTracker(runner, arena), uncertainty, skills, search)]
+        arena = Arena.build(sim.arena, sim.arena_size) if layout.search else None
+        return DummyVecEnv([lambda: make_policy_env(task, sim, LNetTracker(runner, arena), layout, skills)]
                            * params.n_envs)
     raw = vec_env([lambda: make_task_env(PLAYS[task], sim, render_frames=True)] * params.n_envs)
-    return LNetVecObservation(raw, runner, task, sim.n_objects, uncertainty, search)
+    return LNetVecObservation(raw, runner, task, sim.n_objects, layout)
 
 
 def variant_sim(variant: Variant, sim: SimConfig) -> SimConfig:

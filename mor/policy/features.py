@@ -7,7 +7,7 @@ triple is [σ_forward m, σ_left m, correlation] of a covariance rotated into th
 - agent: x, y, cos θ, sin θ                                              4
 - each object: x, y, polar                                               5 n
 - held: one-hot over the n objects and "nothing"                         n + 1
-- clearance: free distance ahead along 5 rays (-60..60 deg), m            5  (``mor.policy.clearance``)
+- clearance: free distance along R rays (default -60..60 deg), m          R  (``mor.policy.clearance``)
 - goal, by task:
     pick      one-hot goal object (n), polar of the goal object (3)
     drop      goal position x, y (2), polar of the goal position (3)
@@ -15,7 +15,11 @@ triple is [σ_forward m, σ_left m, correlation] of a covariance rotated into th
 - uncertainty (left out when ``uncertainty=False``): the agent's triple and heading σ (4), each object's
   triple (3 n), and for pick the goal object's triple (3)
 - the stated belief (only with ``search=True``): each object's found flag and lost probability (2 n), for pick
-  the goal object's (2), and the search belief's mass around the agent (``mor.policy.search_view``, 16)
+  the goal object's (2), and the search belief's mass around the agent (``mor.policy.search_view``; S sectors x
+  rings, default 8 x 2)
+
+The rays and the sectors are ``policy.observation`` in ``params.yaml`` (``ObservationParams``); the layout of a
+variant is ``ObservationLayout.of(variant, params)``.
 
 The egocentric polar features are computed from the same global belief (they tell the policy nothing new),
 but without them PPO does not learn Pick (docs/assumptions.md, "Policies").
@@ -24,27 +28,44 @@ but without them PPO does not learn Pick (docs/assumptions.md, "Policies").
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from mor.policy.belief import PoseBelief
-from mor.policy.clearance import RAY_ANGLES, clearance
+from mor.policy.clearance import clearance
 from mor.policy.names import Task
-from mor.policy.search_view import SEARCH_RINGS, SEARCH_SECTORS, sector_names
+from mor.policy.params import ObservationParams
+from mor.policy.search_view import sector_count, sector_masses, sector_names
+from mor.policy.variants import Variant
 from mor.sim.arena import Arena
 
 
+@dataclass(frozen=True)
+class ObservationLayout:
+    """What a pose policy's vector holds: the uncertainty entries or not, the stated belief's parts or not, and
+    the derived features' settings (``features``: the free-space rays, the search sectors)."""
 
-def feature_names(task: Task, n_objects: int, uncertainty: bool, search: bool = False) -> list[str]:
+    uncertainty: bool = True
+    search: bool = False
+    features: ObservationParams = field(default_factory=ObservationParams)
+
+    @classmethod
+    def of(cls, variant: Variant, features: ObservationParams) -> ObservationLayout:
+        """``variant``'s layout with the profile's ``policy.observation`` settings."""
+        return cls(variant.uncertainty, variant.search, features)
+
+
+def feature_names(task: Task, n_objects: int, layout: ObservationLayout) -> list[str]:
     """The name of each entry of ``observation_vector``'s output, in order."""
     polar = ("distance", "cos_bearing", "sin_bearing")
     names = ["agent_x", "agent_y", "agent_cos", "agent_sin"]
     for i in range(n_objects):
         names += [f"object{i}_x", f"object{i}_y", *(f"object{i}_{p}" for p in polar)]
     names += [f"held_{i}" for i in range(n_objects)] + ["held_none"]
-    names += [f"clearance_{round(float(np.rad2deg(a))):+d}deg" for a in RAY_ANGLES]
+    names += [f"clearance_{round(ray):+d}deg" for ray in layout.features.clearance_rays_deg]
     if task == "pick":
         names += [f"goal_is_{i}" for i in range(n_objects)] + [f"goal_{p}" for p in polar]
     elif task == "drop":
@@ -52,22 +73,22 @@ def feature_names(task: Task, n_objects: int, uncertainty: bool, search: bool = 
     else:
         for i in range(n_objects):
             names += [f"target{i}_x", f"target{i}_y", f"object{i}_to_target", *(f"target{i}_{p}" for p in polar)]
-    if uncertainty:
+    if layout.uncertainty:
         triple = ("sigma_forward", "sigma_left", "correlation")
         names += [f"agent_{t}" for t in triple] + ["heading_sigma"]
         for i in range(n_objects):
             names += [f"object{i}_{t}" for t in triple]
         if task == "pick":
             names += [f"goal_{t}" for t in triple]
-    if search:
+    if layout.search:
         names += [f"object{i}_{part}" for i in range(n_objects) for part in ("found", "lost")]
         names += ["goal_found", "goal_lost"] if task == "pick" else []
-        names += sector_names()
+        names += sector_names(layout.features.search_sectors, layout.features.search_ring_edges_m)
     return names
 
 
-def observation_size(task: Task, n_objects: int, uncertainty: bool, search: bool = False) -> int:
-    return len(feature_names(task, n_objects, uncertainty, search))
+def observation_size(task: Task, n_objects: int, layout: ObservationLayout) -> int:
+    return len(feature_names(task, n_objects, layout))
 
 
 def _polar(belief: PoseBelief, points: NDArray) -> NDArray:
@@ -95,11 +116,10 @@ def _ego_uncertainty(covariance: NDArray, heading: NDArray) -> NDArray:
 
 
 def observation_vector(
-    belief: PoseBelief, held: NDArray, task: Task, goal: NDArray, uncertainty: bool, arena: Arena,
-    search: bool = False,
+    belief: PoseBelief, held: NDArray, task: Task, goal: NDArray, layout: ObservationLayout, arena: Arena,
 ) -> NDArray[np.float32]:
-    """The flat observation (N, D) of ``feature_names(task, n, uncertainty, search)`` in ``arena`` (its walls are
-    known). A belief without stated parts (the truth's) states every object found, none lost, nothing searched.
+    """The flat observation (N, D) of ``feature_names(task, n, layout)`` in ``arena`` (its walls are known). A
+    belief without stated parts (the truth's) states every object found, none lost, nothing searched.
 
     held (N,) index of the held object, n when none (the env's convention). goal by task: pick (N,) object
     index; drop (N, 2) target position, m; decision (N, n, 2) every object's target position, m.
@@ -108,7 +128,8 @@ def observation_vector(
     rows = np.arange(n_envs)
     parts = [belief.agent_mean, np.cos(belief.heading)[:, None], np.sin(belief.heading)[:, None],
              np.concatenate([belief.object_mean, _polar(belief, belief.object_mean)], -1).reshape(n_envs, -1),
-             np.eye(n + 1, dtype=np.float32)[np.asarray(held, int)], clearance(belief, held, arena)]
+             np.eye(n + 1, dtype=np.float32)[np.asarray(held, int)],
+             clearance(belief, held, arena, layout.features.clearance_rays_deg, layout.features.clearance_max_m)]
     if task == "pick":
         index = np.asarray(goal, int).reshape(n_envs)
         parts += [np.eye(n, dtype=np.float32)[index], _polar(belief, belief.object_mean[rows, index])]
@@ -119,25 +140,26 @@ def observation_vector(
         targets = np.asarray(goal, np.float32).reshape(n_envs, n, 2)
         to_target = np.linalg.norm(belief.object_mean - targets, axis=-1)[..., None]
         parts.append(np.concatenate([targets, to_target, _polar(belief, targets)], -1).reshape(n_envs, -1))
-    if uncertainty:
+    if layout.uncertainty:
         heading_sigma = np.sqrt(np.maximum(belief.heading_var, 0.0))[:, None]
         objects = _ego_uncertainty(belief.object_cov, belief.heading)
         parts += [_ego_uncertainty(belief.agent_cov, belief.heading), heading_sigma, objects.reshape(n_envs, -1)]
         if task == "pick":
             parts.append(objects[rows, np.asarray(goal, int).reshape(n_envs)])
-    if search:
-        parts += _stated(belief, task, goal)
+    if layout.search:
+        parts += _stated(belief, task, goal, layout.features)
     return np.concatenate([np.asarray(p, np.float32).reshape(n_envs, -1) for p in parts], -1)
 
 
-def _stated(belief: PoseBelief, task: Task, goal: NDArray) -> list[NDArray]:
+def _stated(belief: PoseBelief, task: Task, goal: NDArray, features: ObservationParams) -> list[NDArray]:
     """The stated belief's features: (found, lost) per object, the goal's for pick, and the search sectors."""
     n_envs, n = belief.n_envs, belief.n_objects
     found = np.ones((n_envs, n), np.float32) if belief.object_found is None else belief.object_found
     lost = np.zeros((n_envs, n), np.float32) if belief.object_lost is None else belief.object_lost
     pairs = np.stack([found, lost], -1)                                                  # (N, n, 2)
-    sectors = (np.zeros((n_envs, SEARCH_SECTORS * SEARCH_RINGS), np.float32) if belief.search_sectors is None
-               else belief.search_sectors)
+    sectors = (np.zeros((n_envs, sector_count(features.search_sectors, features.search_ring_edges_m)), np.float32)
+               if belief.search is None else sector_masses(belief.search, belief.agent_mean, belief.heading,
+                                                           features.search_sectors, features.search_ring_edges_m))
     goal_pair = [pairs[np.arange(n_envs), np.asarray(goal, int).reshape(n_envs)]] if task == "pick" else []
     return [pairs.reshape(n_envs, -1), *goal_pair, sectors]
 
@@ -149,12 +171,11 @@ Encode = Callable[[Task, list[dict[str, Any]], list[dict[str, Any]], PoseBelief,
                   np.ndarray | dict[str, np.ndarray]]
 
 
-def pose_inputs(uncertainty: bool, search: bool = False) -> Encode:
-    """The pose policies' encoding: ``observation_vector`` of the beliefs (with or without their uncertainty, with
-    or without the stated belief's parts)."""
+def pose_inputs(layout: ObservationLayout) -> Encode:
+    """The pose policies' encoding: ``observation_vector`` of the beliefs in ``layout``."""
     def encode(task: Task, observations: list[dict[str, Any]], infos: list[dict[str, Any]], belief: PoseBelief,
                goals: np.ndarray, arena: Arena) -> np.ndarray:
         held = np.array([o["held"] for o in observations])
-        return observation_vector(belief, held, task, goals, uncertainty, arena, search)
+        return observation_vector(belief, held, task, goals, layout, arena)
 
     return encode

@@ -21,7 +21,7 @@ import torch
 from gymnasium import spaces
 
 from mor.policy.belief import PoseBelief
-from mor.policy.features import Encode, observation_vector, pose_inputs
+from mor.policy.features import Encode, ObservationLayout, observation_vector, pose_inputs
 from mor.policy.names import Task
 from mor.policy.observations import BatchTracker, observation_space, task_goal
 from mor.sim.arena import Arena
@@ -328,22 +328,22 @@ class HierarchicalRearrange(gym.Env):
     observation_space: Box (D,) the ``decision`` layout of ``mor.policy.features``; action_space: Discrete(n),
     the object to rearrange next. ``info`` carries the full task's ``metrics`` at the end and
     ``primitive_steps``, the environment steps this decision took. ``tracker``: a tracker of one environment.
-    ``encode``: what the skills read (default: the pose policies' ``pose_inputs``; a baseline's
-    ``mor.policy.baselines.baseline_inputs``).
+    ``layout``: the decision's observation layout; ``encode``: what the skills read (default: the pose policies'
+    ``pose_inputs`` in ``layout``; a baseline's ``mor.policy.baselines.baseline_inputs``).
     """
 
     metadata = {"render_modes": []}
 
-    def __init__(self, env: gym.Env, tracker: BatchTracker, pick: Skill, drop: Skill, uncertainty: bool = True,
-                 encode: Encode | None = None, search: bool = False) -> None:
+    def __init__(self, env: gym.Env, tracker: BatchTracker, pick: Skill, drop: Skill,
+                 layout: ObservationLayout = ObservationLayout(), encode: Encode | None = None) -> None:
         if not isinstance(env.unwrapped, RearrangeEnv):
             raise TypeError(f"HierarchicalRearrange needs MOR/Rearrange-v0, got {type(env.unwrapped).__name__}")
-        self.env, self.uncertainty, self.search = env, uncertainty, search
-        self.hierarchy = SkillHierarchy([env], tracker, {"pick": pick, "drop": drop},
-                                        encode or pose_inputs(uncertainty, search), "decision")
+        self.env, self.layout = env, layout
+        self.hierarchy = SkillHierarchy([env], tracker, {"pick": pick, "drop": drop}, encode or pose_inputs(layout),
+                                        "decision")
         self.slot = self.hierarchy.slots[0]
         self.n_objects = env.unwrapped.config.n_objects
-        self.observation_space = observation_space("decision", self.n_objects, uncertainty, search)
+        self.observation_space = observation_space("decision", self.n_objects, layout)
         self.action_space = spaces.Discrete(self.n_objects)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
@@ -379,4 +379,4 @@ class HierarchicalRearrange(gym.Env):
 
     def _decision_vector(self) -> np.ndarray:
         return observation_vector(self.belief, np.array([self.slot.held]), "decision", self.slot.targets[None],
-                                  self.uncertainty, self.hierarchy.arena, self.search)[0]
+                                  self.layout, self.hierarchy.arena)[0]

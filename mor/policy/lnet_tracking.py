@@ -14,27 +14,25 @@ from mor.lnet.runtime import LNetRunner
 from mor.lnet.stated import Estimates
 from mor.lnet.search import SearchMap
 from mor.lnet.streaming import StreamingTracker, stack_frames
-from mor.policy.belief import PoseBelief
-from mor.policy.features import observation_vector
+from mor.policy.belief import PoseBelief, SearchBelief
+from mor.policy.features import ObservationLayout, observation_vector
 from mor.policy.names import Task
 from mor.policy.observations import SingleTracker, observation_space, task_goal
-from mor.policy.search_view import sector_masses
 from mor.sim.arena import Arena
 
 
 def belief_from_estimates(estimates: Estimates, search: SearchMap | None = None) -> PoseBelief:
     """The L-Net's calibrated estimates as a belief; the heading's variance is 1/κ of its von Mises. With the
-    stream's ``search`` map (its estimates carry the search density), the search belief's sectors around the
-    agent too."""
-    sectors = None
+    stream's ``search`` map (its estimates carry the search density), the search belief too."""
+    searched = None
     if search is not None and estimates.search_density is not None:
-        sectors = sector_masses(estimates.search_density, search.grid, search.cell_area, estimates.agent_mean,
-                                estimates.heading, estimates.object_searching.any(axis=1))
+        searched = SearchBelief(estimates.search_density, search.grid, search.cell_area,
+                                estimates.object_searching.any(axis=1))
     return PoseBelief(estimates.agent_mean, estimates.agent_cov, estimates.heading,
                       (1.0 / np.maximum(estimates.heading_kappa, 1e-6)).astype(np.float32),
                       estimates.object_mean, estimates.object_cov,
                       object_found=(~estimates.object_searching).astype(np.float32),
-                      object_lost=estimates.object_lost.astype(np.float32), search_sectors=sectors)
+                      object_lost=estimates.object_lost.astype(np.float32), search=searched)
 
 
 class LNetBatchTracker:
@@ -71,10 +69,10 @@ class LNetVecObservation(VecEnvWrapper):
     belief: one L-Net forward per vector step (two when an episode ends: its last frame, then the next
     episode's first; ``info["terminal_observation"]`` is the last frame's vector, as SB3 expects)."""
 
-    def __init__(self, venv: VecEnv, runner: LNetRunner, task: Task, n_objects: int, uncertainty: bool,
-                 search: bool = False) -> None:
-        super().__init__(venv, observation_space=observation_space(task, n_objects, uncertainty, search))
-        self.runner, self.task, self.uncertainty, self.search = runner, task, uncertainty, search
+    def __init__(self, venv: VecEnv, runner: LNetRunner, task: Task, n_objects: int, layout: ObservationLayout
+                 ) -> None:
+        super().__init__(venv, observation_space=observation_space(task, n_objects, layout))
+        self.runner, self.task, self.layout = runner, task, layout
         self.arena = venv.get_attr("arena")[0]
         self.stream = self._stream()
         self.actions = np.full(venv.num_envs, NO_ACTION)
@@ -107,9 +105,9 @@ class LNetVecObservation(VecEnvWrapper):
         return self._vectors(now, observations), rewards, dones, infos
 
     def _stream(self) -> StreamingTracker:
-        return StreamingTracker(self.runner, self.num_envs, self.arena if self.search else None)
+        return StreamingTracker(self.runner, self.num_envs, self.arena if self.layout.search else None)
 
     def _vectors(self, estimates: Estimates, observations: dict[str, np.ndarray]) -> np.ndarray:
         goal = task_goal(observations, self.task)
         return observation_vector(belief_from_estimates(estimates, self.stream.search), observations["held"],
-                                  self.task, goal, self.uncertainty, self.arena, self.search)
+                                  self.task, goal, self.layout, self.arena)

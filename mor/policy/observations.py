@@ -1,6 +1,6 @@
 """Gymnasium wrappers that turn a MOR environment's observation into the policy's flat observation vector.
 
-``PoseObservation(env, tracker, uncertainty)`` works for any tracker with batch 1 (any Gymnasium or SB3 user
+``PoseObservation(env, tracker, layout)`` works for any tracker with batch 1 (any Gymnasium or SB3 user
 can train on it); ``mor.policy.vec_lnet.LNetVecObservation`` is the batched form for the L-Net, one forward per
 vector step. Both build the vector with ``mor.policy.features.observation_vector`` from a ``PoseBelief``.
 """
@@ -14,7 +14,7 @@ import numpy as np
 from gymnasium import spaces
 
 from mor.policy.belief import PoseBelief
-from mor.policy.features import observation_size, observation_vector
+from mor.policy.features import ObservationLayout, observation_size, observation_vector
 from mor.policy.names import Task
 from mor.sim.tasks import DropEnv, PickEnv, RearrangeEnv
 
@@ -35,8 +35,8 @@ def task_goal(observation: dict[str, Any], task: Task) -> np.ndarray:
     return np.asarray(observation[key])
 
 
-def observation_space(task: Task, n_objects: int, uncertainty: bool, search: bool = False) -> spaces.Box:
-    return spaces.Box(-np.inf, np.inf, (observation_size(task, n_objects, uncertainty, search),), np.float32)
+def observation_space(task: Task, n_objects: int, layout: ObservationLayout) -> spaces.Box:
+    return spaces.Box(-np.inf, np.inf, (observation_size(task, n_objects, layout),), np.float32)
 
 
 class BatchTracker(Protocol):
@@ -99,17 +99,17 @@ class PoseObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """A MOR env whose observation is the flat policy vector (``mor.policy.features``) of a tracker's belief.
 
     observation_space: Box (D,) float32; ``action_masks()`` is the env's; ``belief``: the tracker's latest belief
-    (``info`` stays the env's plain values). Its constructor's arguments are recorded in ``spec``, so that
-    ``spec.make()`` (Gymnasium's ``check_env``) builds it again.
+    (``info`` stays the env's plain values); layout: what the vector holds (default: with the uncertainty entries,
+    without the stated belief, the default rays and sectors). Its constructor's arguments are recorded in
+    ``spec``, so that ``spec.make()`` (Gymnasium's ``check_env``) builds it again.
     """
 
-    def __init__(self, env: gym.Env, tracker: Tracker, uncertainty: bool = True, search: bool = False) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, tracker=tracker, uncertainty=uncertainty, search=search)
+    def __init__(self, env: gym.Env, tracker: Tracker, layout: ObservationLayout = ObservationLayout()) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, tracker=tracker, layout=layout)
         super().__init__(env)
         self.task: Task = task_of(env)
-        self.tracker = tracker
-        self.uncertainty, self.search = uncertainty, search
-        self.observation_space = observation_space(self.task, env.unwrapped.config.n_objects, uncertainty, search)
+        self.tracker, self.layout = tracker, layout
+        self.observation_space = observation_space(self.task, env.unwrapped.config.n_objects, layout)
         self.belief: PoseBelief | None = None
 
     def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
@@ -127,5 +127,5 @@ class PoseObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def _vector(self, observation: dict[str, Any]) -> np.ndarray:
         goal = task_goal(observation, self.task)[None]
-        return observation_vector(self.belief, np.array([observation["held"]]), self.task, goal, self.uncertainty,
-                                  self.env.unwrapped.arena, self.search)[0]
+        return observation_vector(self.belief, np.array([observation["held"]]), self.task, goal, self.layout,
+                                  self.env.unwrapped.arena)[0]

@@ -9,6 +9,7 @@ from pydantic import Field, field_validator
 from mor.params_model import ParamsModel, Seeds
 from mor.policy.names import Task
 from mor.policy.variants import POSE_VARIANTS
+from mor.sim.rules import PICK_RANGE
 
 
 class PPOParams(ParamsModel):
@@ -48,6 +49,36 @@ class BaselineParams(ParamsModel):
     drop: PPOParams = Field(default_factory=PPOParams)
 
 
+class ObservationParams(ParamsModel):
+    """The derived features of the pose policies' observation (``mor.policy.features``): the free-space rays and
+    the search belief's sectors. They are part of a policy's signature: a policy loads only where they match."""
+
+    clearance_rays_deg: list[float] = Field(
+        default_factory=lambda: [-60.0, -30.0, 0.0, 30.0, 60.0], min_length=1,
+        description="degrees from the heading, left positive: the free-space rays (mor.policy.clearance)")
+    clearance_max_m: float = Field(3.0, gt=0, description="metres: a free-space ray is cut here")
+    search_sectors: int = Field(8, ge=1, le=360, description="bearing sectors of equal width around the believed "
+                                                            "heading that the search belief's mass is read in")
+    search_ring_edges_m: list[float] = Field(
+        default_factory=lambda: [PICK_RANGE], min_length=1,
+        description="metres: the outer radii of the search sectors' range rings, increasing (the last ring is "
+                    "unbounded); the default ring is PICK's reach")
+
+    @field_validator("clearance_rays_deg")
+    @classmethod
+    def _distinct_rays(cls, rays: list[float]) -> list[float]:
+        if len(set(rays)) != len(rays) or not all(-180.0 < ray <= 180.0 for ray in rays):
+            raise ValueError(f"clearance rays must be distinct angles in (-180, 180] degrees; got {rays}")
+        return rays
+
+    @field_validator("search_ring_edges_m")
+    @classmethod
+    def _increasing_rings(cls, edges: list[float]) -> list[float]:
+        if edges[0] <= 0 or any(b <= a for a, b in zip(edges, edges[1:])):
+            raise ValueError(f"search ring edges must be positive and increasing (metres); got {edges}")
+        return edges
+
+
 class PolicyParams(ParamsModel):
     """Phase I (pick, drop) and phase II (decision) training for each observation variant."""
 
@@ -65,6 +96,7 @@ class PolicyParams(ParamsModel):
                                                     "(mor.policy.variants; same layout, uncertainty inputs "
                                                     "zero-weighted) and train lnet_steps more")
     baseline: BaselineParams = Field(default_factory=BaselineParams)
+    observation: ObservationParams = Field(default_factory=ObservationParams)
     lnet_steps: dict[Task, int] = Field(default_factory=lambda: {"pick": 100_000, "drop": 100_000, "decision": 0},
                                         description="fine-tuning steps of the L-Net variants when warm-started")
 

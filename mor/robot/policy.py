@@ -17,6 +17,7 @@ from mor.lnet.runtime import LNetRunner
 from mor.policy.belief import PoseBelief
 from mor.policy.hierarchy import SkillPolicy, Slot
 from mor.policy.lnet_tracking import LNetBatchTracker
+from mor.policy.params import ObservationParams
 from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
 
@@ -75,21 +76,22 @@ class HierarchyPolicy:
     held: the held object's index, -1 when none. targets (n, 2) metres.
     """
 
-    def __init__(self, method: str, policies: TrainedPolicies, arena: Arena, n_objects: int) -> None:
+    def __init__(self, method: str, policies: TrainedPolicies, arena: Arena, n_objects: int,
+                 features: ObservationParams) -> None:
         spec = method_spec(method)
         self.method, self.n_objects = method, n_objects
         #: the arena whose search looks the pose source must keep, where the policy reads the search belief
         self.search_arena = arena if spec.variant.search else None
-        self._policy = SkillPolicy({"pick": policies.pick, "drop": policies.drop}, method_inputs(spec), "decision",
-                                   arena)
-        self._decide = decider(spec, policies, arena)
+        self._policy = SkillPolicy({"pick": policies.pick, "drop": policies.drop}, method_inputs(spec, features),
+                                   "decision", arena)
+        self._decide = decider(spec, policies, arena, features)
         self._slot = Slot(None)
 
     @classmethod
     def of(cls, loaded: LoadedMethod, sim: SimConfig) -> HierarchyPolicy:
         """A ``loaded`` method's committed policies (``mor.eval.methods.load_method``) in ``sim``'s world."""
         return cls(robot_method(loaded.method.name), loaded.policies, Arena.build(sim.arena, sim.arena_size),
-                   sim.n_objects)
+                   sim.n_objects, loaded.features)
 
     def start(self, seed: int) -> None:
         """A new episode: no skill running; the skills' draws from a generator seeded by ``seed`` (as in

@@ -44,7 +44,8 @@ class StepBatch:
 
 
 class TaskBatch:
-    """``n_envs`` episodes of ``task`` ("pick" or "drop") in the world ``sim`` (rendering fields unused).
+    """``n_envs`` episodes of ``task`` ("pick" or "drop") in the world ``sim`` (rendering fields unused), paid by
+    ``sim.rewards``.
 
     State (after ``reset``): ``world`` (``WorldBatch``), ``goal`` (N,) the goal object, ``targets`` (N, n, 2) m,
     ``steps`` (N,) steps taken in the current episode. Slots whose episode has ended must be reset before they
@@ -137,11 +138,11 @@ class TaskBatch:
         after = self.world.agent_pose[:, :2]
         if self.task == "pick":
             reward, terminated, success = pick_verdicts(before, after, goal_position, self.goal, actions,
-                                                        events.picked, events.obstructed)
+                                                        events.picked, events.obstructed, self.sim.rewards)
         else:
             landed = self.world.floor_positions[rows, self.goal]
             reward, terminated, success = drop_verdicts(before, after, goal_position, self.goal, actions,
-                                                        events.dropped, landed, events.obstructed)
+                                                        events.dropped, landed, events.obstructed, self.sim.rewards)
         self.steps += 1
         truncated = ~terminated & (self.steps >= self.horizon)
         return StepBatch(reward, terminated, truncated, success)

@@ -10,8 +10,21 @@ from mor.errors import ConfigError
 from mor.params_model import ParamsModel
 
 
+class RewardParams(ParamsModel):
+    """The weights of the tasks' rewards (paper Eq. 1 and 2, ``mor.sim.tasks``), in reward units; the defaults are
+    the paper's."""
+
+    success: float = Field(10.0, ge=0.0, description="paid for a success: Pick's goal object picked, Drop's object "
+                           "dropped at its target, and in Rearrange per object newly lying at its target (taken back "
+                           "when it leaves)")
+    collision: float = Field(1.0, ge=0.0, description="taken on a step whose MOVE was obstructed (every task)")
+    step: float = Field(0.01, ge=0.0, description="taken on every Rearrange step (Eq. 2); Pick and Drop have none "
+                        "(Eq. 1)")
+
+
 class SimConfig(ParamsModel):
-    """What a world looks like. Distances in metres, image size in pixels (square images)."""
+    """What a world looks like, and what its tasks pay (``rewards``). Distances in metres, image size in pixels
+    (square images)."""
 
     n_objects: int = Field(3, ge=1, le=5, description="objects per episode")
     image_size: int = Field(64, ge=16, le=512, description="first-person image side, pixels")
@@ -21,6 +34,8 @@ class SimConfig(ParamsModel):
         "per_side", description="per_side: each wall side has its own texture sub-pool; symmetric: one shared pool"
     )
     landmark: bool = Field(False, description="show a non-colliding marker at each drop target (paper Figure 4)")
+    rewards: RewardParams = Field(default_factory=RewardParams, description="the tasks' reward weights; they shape "
+                                  "no frame, so collected data does not record them (mor.data.collect)")
 
 
 def format_validation_error(error: ValidationError, where: str) -> str:

@@ -69,7 +69,8 @@ class MOREnv(gym.Env[Observation, int]):
     def __init__(
         self, render_mode: str | None = None, horizon: int | None = None, render_frames: bool = True, **sim_params: Any
     ) -> None:
-        """sim_params: the fields of ``SimConfig`` (n_objects, image_size, arena, arena_size, texture_pool, landmark).
+        """sim_params: the fields of ``SimConfig`` (n_objects, image_size, arena, arena_size, texture_pool, landmark,
+        rewards: a ``RewardParams`` or a dict of its fields, e.g. ``rewards={"success": 5.0}``).
         render_frames: False leaves ``image`` out of the observation and never builds the MuJoCo scene."""
         self.config: SimConfig = make_sim_config(where=type(self).__name__, **sim_params)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:

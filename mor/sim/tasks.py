@@ -7,42 +7,41 @@ from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
 from mor.sim import metrics
+from mor.sim.config import RewardParams
 from mor.sim.env import MOREnv, StepOutcome
 from mor.sim.geometry import vector_norm
 from mor.sim.rules import Action, Events, WorldState
-
-SUCCESS_REWARD: float = 10.0
-COLLISION_PENALTY: float = 1.0
-STEP_PENALTY: float = 0.01
 
 #: (reward, terminated, success): one step's verdict, or N steps' as (N,) arrays
 Verdicts = tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]
 
 
 def progress_reward(before: ArrayLike, after: ArrayLike, goal: ArrayLike, success: ArrayLike,
-                    obstructed: ArrayLike) -> NDArray[np.float64]:
-    """Eq. 1: -(D_{t+1} - D_t) + 10 * [success] - [obstructed], D the agent-to-goal distance; agent positions
-    ``before`` and ``after`` the step and the goal (..., 2) metres, flags (...,) -> (...,)."""
+                    obstructed: ArrayLike, rewards: RewardParams) -> NDArray[np.float64]:
+    """Eq. 1: -(D_{t+1} - D_t) + s * [success] - c * [obstructed], D the agent-to-goal distance (metres), s and c
+    ``rewards.success`` and ``rewards.collision`` (the paper's 10 and 1); agent positions ``before`` and ``after``
+    the step and the goal (..., 2) metres, flags (...,) -> (...,)."""
     progress = vector_norm(np.subtract(before, goal)) - vector_norm(np.subtract(after, goal))
-    return progress + SUCCESS_REWARD * np.asarray(success) - COLLISION_PENALTY * np.asarray(obstructed)
+    return progress + rewards.success * np.asarray(success) - rewards.collision * np.asarray(obstructed)
 
 
 def pick_verdicts(before: ArrayLike, after: ArrayLike, goal_position: ArrayLike, goal: ArrayLike, action: ArrayLike,
-                  picked: ArrayLike, obstructed: ArrayLike) -> Verdicts:
-    """Pick's verdict on N steps (or one): agent positions (..., 2) before and after, the goal object's position
-    (..., 2) and index, the action, what PICK took (-1: nothing) and whether a MOVE was obstructed (...,)."""
+                  picked: ArrayLike, obstructed: ArrayLike, rewards: RewardParams) -> Verdicts:
+    """Pick's verdict on N steps (or one): agent positions (..., 2) metres before and after, the goal object's
+    position (..., 2) metres and index, the action, what PICK took (-1: nothing) and whether a MOVE was obstructed
+    (...,); paid by ``progress_reward`` with ``rewards``."""
     success = np.equal(picked, goal)
     ended = np.equal(action, Action.PICK) | np.asarray(obstructed)
-    return progress_reward(before, after, goal_position, success, obstructed), ended, success
+    return progress_reward(before, after, goal_position, success, obstructed, rewards), ended, success
 
 
 def drop_verdicts(before: ArrayLike, after: ArrayLike, goal_position: ArrayLike, goal: ArrayLike, action: ArrayLike,
-                  dropped: ArrayLike, landed: ArrayLike, obstructed: ArrayLike) -> Verdicts:
+                  dropped: ArrayLike, landed: ArrayLike, obstructed: ArrayLike, rewards: RewardParams) -> Verdicts:
     """Drop's verdict on N steps (or one): as ``pick_verdicts`` with the target position, what DROP released
-    (-1: nothing) and where the goal object lies on the floor after the step (..., 2)."""
+    (-1: nothing) and where the goal object lies on the floor after the step (..., 2) metres."""
     success = np.equal(dropped, goal) & metrics.is_fixed(landed, goal_position)
     ended = np.equal(action, Action.DROP) | np.asarray(obstructed)
-    return progress_reward(before, after, goal_position, success, obstructed), ended, success
+    return progress_reward(before, after, goal_position, success, obstructed, rewards), ended, success
 
 
 def _goal_position_space(half_extent: float, shape: tuple[int, ...]) -> spaces.Box:
@@ -52,8 +51,8 @@ def _goal_position_space(half_extent: float, shape: tuple[int, ...]) -> spaces.B
 class PickEnv(MOREnv):
     """Pick(s_i^0): pick object ``goal_object``. Ends on any PICK, an obstruction, or after 150 steps.
 
-    Reward (Eq. 1): -(D_{t+1} - D_t) + 10 * [picked the goal] - [obstructed], D = agent-to-goal-object distance.
-    DROP is removed (masked).
+    Reward (Eq. 1): -(D_{t+1} - D_t) + 10 * [picked the goal] - [obstructed], D = agent-to-goal-object distance;
+    the weights are ``SimConfig.rewards`` (these are its defaults). DROP is removed (masked).
     """
 
     default_horizon = 150
@@ -71,7 +70,7 @@ class PickEnv(MOREnv):
     def _outcome(self, before: WorldState, events: Events) -> StepOutcome:
         reward, ended, success = pick_verdicts(
             before.agent_pose[:2], self.state.agent_pose[:2], before.floor_positions[self.goal_object],
-            self.goal_object, events.action, events.picked, events.obstructed)
+            self.goal_object, events.action, events.picked, events.obstructed, self.config.rewards)
         return StepOutcome(float(reward), bool(ended), bool(success))
 
 
@@ -106,7 +105,7 @@ class DropEnv(MOREnv):
     def _outcome(self, before: WorldState, events: Events) -> StepOutcome:
         reward, ended, success = drop_verdicts(
             before.agent_pose[:2], self.state.agent_pose[:2], self.goal_position, self.goal_object, events.action,
-            events.dropped, self.state.floor_positions[self.goal_object], events.obstructed)
+            events.dropped, self.state.floor_positions[self.goal_object], events.obstructed, self.config.rewards)
         return StepOutcome(float(reward), bool(ended), bool(success))
 
 
@@ -114,7 +113,8 @@ class RearrangeEnv(MOREnv):
     """The full task: move every object to within 1 m of its target. Ends when all are placed (nothing held),
     on an obstruction, or after 1000 steps.
 
-    Reward (Eq. 2): -0.01 + 10 * (change in the number of objects lying at their targets) - [obstructed].
+    Reward (Eq. 2): -0.01 + 10 * (change in the number of objects lying at their targets) - [obstructed], the
+    weights ``SimConfig.rewards`` (these are its defaults).
     Counting the change (rather than a one-off indicator) pays each placement once and takes it back if the
     object is picked up again, so the reward cannot be farmed (docs/assumptions.md).
     """
@@ -142,7 +142,8 @@ class RearrangeEnv(MOREnv):
         placed = self._placed()
         change, self._placed_count = placed - self._placed_count, placed
         success = placed == self.config.n_objects
-        reward = -STEP_PENALTY + SUCCESS_REWARD * change - COLLISION_PENALTY * events.obstructed
+        rewards = self.config.rewards
+        reward = -rewards.step + rewards.success * change - rewards.collision * events.obstructed
         return StepOutcome(float(reward), success or events.obstructed, success)
 
     def _metrics(self, outcome: StepOutcome) -> dict[str, float]:

@@ -7,8 +7,8 @@ import pytest
 import torch
 from sb3_contrib import MaskablePPO
 
-from mor.eval.lockstep import play_lockstep
 from mor.eval.failures import ENDINGS
+from mor.eval.lockstep import play_lockstep
 from mor.eval.methods import METHODS, TrainedPolicies
 from mor.eval.protocol import decider
 from mor.lnet.calibration_file import FittedCalibration
@@ -16,12 +16,15 @@ from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig
 from mor.lnet.runtime import LNetRunner
 from mor.policy.envs import make_policy_env
-from mor.policy.features import pose_inputs
+from mor.policy.features import ObservationLayout, pose_inputs
 from mor.policy.hierarchy import Skill
 from mor.policy.lnet_tracking import LNetBatchTracker, LNetTracker
 from mor.policy.observations import GroundTruthBatchTracker, GroundTruthTracker
+from mor.policy.params import ObservationParams
 from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
+
+FEATURES = ObservationParams()  # the default policy.observation settings
 
 SIM = SimConfig(n_objects=2, image_size=16)
 ARENA = Arena.build("square", 6.0)
@@ -29,7 +32,7 @@ ARENA = Arena.build("square", 6.0)
 
 def _skill(task: str, seed: int) -> Skill:
     """An untrained (random-weight) policy: deterministic, so any two players must agree on every action."""
-    env = make_policy_env(task, SIM, GroundTruthTracker(), uncertainty=True)
+    env = make_policy_env(task, SIM, GroundTruthTracker(), ObservationLayout())
     return Skill(MaskablePPO("MlpPolicy", env, seed=seed, device="cpu", policy_kwargs={"net_arch": [8, 8]}))
 
 
@@ -56,7 +59,7 @@ def quick() -> TrainedPolicies:
 @pytest.fixture(scope="module")
 def policies() -> TrainedPolicies:
     pick, drop = _skill("pick", 0), _skill("drop", 1)
-    decision_env = make_policy_env("decision", SIM, GroundTruthTracker(), True, (pick, drop))
+    decision_env = make_policy_env("decision", SIM, GroundTruthTracker(), ObservationLayout(), (pick, drop))
     decision = Skill(MaskablePPO("MlpPolicy", decision_env, seed=2, device="cpu", policy_kwargs={"net_arch": [8]}))
     return TrainedPolicies(pick, drop, decision)
 
@@ -66,13 +69,14 @@ HORIZON = 40  # short episodes keep the test fast; the rules under test do not d
 
 def _one_at_a_time(task: str, seed: int, tracker, policies: TrainedPolicies, method: str) -> dict:
     if task != "rearrange":
-        env = make_policy_env(task, SIM, tracker, uncertainty=True, horizon=HORIZON)
+        env = make_policy_env(task, SIM, tracker, ObservationLayout(), horizon=HORIZON)
         skill = policies.pick if task == "pick" else policies.drop
         rng = np.random.default_rng(seed)  # as the lockstep player seeds each episode's draws
         act = lambda vector: skill.act(vector, env.action_masks(), rng)  # noqa: E731
     else:
-        env = make_policy_env("decision", SIM, tracker, True, (policies.pick, policies.drop), horizon=HORIZON)
-        decide = decider(METHODS[method], policies, ARENA)
+        env = make_policy_env("decision", SIM, tracker, ObservationLayout(), (policies.pick, policies.drop),
+                              horizon=HORIZON)
+        decide = decider(METHODS[method], policies, ARENA, FEATURES)
         act = lambda vector: int(decide(env.belief, np.array([env.slot.held]), env.slot.targets[None],
                                             np.array([env.slot.chain.index]))[0])  # noqa: E731
     vector, _ = env.reset(seed=seed)
@@ -97,7 +101,8 @@ def test_lockstep_equals_one_episode_at_a_time(task: str, method: str, determini
     keys = [((task, 0, e), 100 + e) for e in range(3)]
     skills = {"pick": policies.pick, "drop": policies.drop}
     played = dict(play_lockstep(task, keys, SIM, GroundTruthBatchTracker(), skills,
-                                decider(METHODS[method], policies, ARENA), pose_inputs(True), n_envs=2,
+                                decider(METHODS[method], policies, ARENA,
+                                        FEATURES), pose_inputs(ObservationLayout()), n_envs=2,
                                 horizon=HORIZON))
     for key, seed in keys:
         alone = _one_at_a_time(task, seed, GroundTruthTracker(), policies, method)
@@ -110,8 +115,9 @@ def test_lockstep_with_the_lnet_equals_one_tracker_per_episode(quick: TrainedPol
                         "test")
     keys = [(("rearrange", 0, e), 200 + e) for e in range(3)]
     played = dict(play_lockstep("rearrange", keys, SIM, LNetBatchTracker(runner, 2),
-                                {"pick": quick.pick, "drop": quick.drop}, decider(METHODS["lnet_nearest_rule"], quick, ARENA),
-                                pose_inputs(True), n_envs=2, horizon=HORIZON))
+                                {"pick": quick.pick, "drop": quick.drop}, decider(METHODS["lnet_nearest_rule"], quick,
+                                                                                  ARENA, FEATURES),
+                                pose_inputs(ObservationLayout()), n_envs=2, horizon=HORIZON))
     for key, seed in keys:
         alone = _one_at_a_time("rearrange", seed, LNetTracker(runner), quick, "lnet_nearest_rule")
         assert played[key] == {**alone, "return": played[key]["return"], "ending": played[key]["ending"]}, key

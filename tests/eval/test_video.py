@@ -16,10 +16,13 @@ from mor.eval.video import write_policy_video
 from mor.policy.baselines import BaselineExtractor, BaselineObservation
 from mor.policy.envs import make_task_env
 from mor.policy.hierarchy import Skill
-from mor.policy.variants import VARIANTS
 from mor.policy.observations import RenderingTruthTracker
+from mor.policy.params import ObservationParams
+from mor.policy.variants import VARIANTS
 from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
+
+FEATURES = ObservationParams()  # the default policy.observation settings
 
 SIM = SimConfig(n_objects=2, image_size=16)
 HORIZON = 12
@@ -40,13 +43,13 @@ def test_a_baselines_video_plays_the_episode_its_evaluation_plays(variant: str, 
     method = METHODS[variant]
     sim = sim_of(method, SIM)
     pick, drop = _skill("pick", variant, sim), _skill("drop", variant, sim)
-    decide = decider(method, None, Arena.build(sim.arena, sim.arena_size))
+    decide = decider(method, None, Arena.build(sim.arena, sim.arena_size), FEATURES)
     out = tmp_path / "episode.gif"
     metrics = write_policy_video(out, sim, RenderingTruthTracker(), {"pick": pick, "drop": drop}, decide,
-                                 method_inputs(method), seed=5, horizon=HORIZON)
+                                 method_inputs(method, FEATURES), seed=5, horizon=HORIZON)
     assert iio.imread(out, index=None).shape[0] == HORIZON + 1  # a frame before each step and one after the last
     (_, played), = play_lockstep("rearrange", [("key", 5)], sim, RenderingTruthTracker(), {"pick": pick, "drop": drop},
-                                 decide, method_inputs(method), n_envs=1, horizon=HORIZON)
+                                 decide, method_inputs(method, FEATURES), n_envs=1, horizon=HORIZON)
     assert metrics == played["metrics"]
 
 
@@ -72,7 +75,7 @@ class _Searching(RenderingTruthTracker):
         self.found = found
         from mor.lnet.lost import arena_grid  # noqa: PLC0415
 
-        self.search_grid = arena_grid(arena)
+        self.search_grid = arena_grid(arena, 0.1)  # the default lnet.arena_grid_spacing (m)
         self.search_density: np.ndarray | None = None
 
     def observe(self, *args, **kwargs):  # noqa: ANN002, ANN003, ANN201
@@ -91,8 +94,8 @@ def test_the_video_shades_the_search_belief_where_the_tracker_states_one(tmp_pat
     frames = {}
     for name, tracker in (("found", _Searching(arena, True)), ("searching", _Searching(arena, False))):
         out = tmp_path / f"{name}.gif"
-        write_policy_video(out, sim, tracker, skills, decider(method, None, arena), method_inputs(method), seed=5,
-                           horizon=3)
+        write_policy_video(out, sim, tracker, skills, decider(method, None, arena, FEATURES),
+                           method_inputs(method, FEATURES), seed=5, horizon=3)
         frames[name] = iio.imread(out, index=None)
     assert frames["found"].shape == frames["searching"].shape
     # the same legend and captions but for "found"/"searching": the shaded floor differs on most of the top view

@@ -260,11 +260,11 @@ def _lost_predictions(n: int, lost: float, seed: int = 0) -> Predictions:
 def test_the_arena_share_of_an_ellipse_is_its_area_until_it_meets_the_walls() -> None:
     truth = np.array([[[0.5, 0.0]], [[2.0, 0.0]], [[30.0, 0.0]]])  # d = 1, 4 and 60 sigma from the centre
     mean, tril = np.zeros((3, 1, 2)), np.broadcast_to(np.eye(2) * 0.5, (3, 1, 2, 2))
-    share = arena_shares(truth, mean, tril, np.ones((3, 1), bool), ARENA).share[:, 0]
+    share = arena_shares(truth, mean, tril, np.ones((3, 1), bool), ARENA, StatedParams.arena_grid_spacing).share[:, 0]
     assert share[0] == pytest.approx(np.pi * 0.5 ** 2 / 36.0, rel=0.05)  # a disc of radius 0.5 m
     assert share[1] == pytest.approx(np.pi * 2.0 ** 2 / 36.0, rel=0.05)
     assert share[2] == 1.0  # the whole arena
-    assert np.all(arena_shares(truth, mean, tril, np.zeros((3, 1), bool), ARENA).share == 0.0)
+    assert np.all(arena_shares(truth, mean, tril, np.zeros((3, 1), bool), ARENA, 0.1).share == 0.0)
 
 
 def test_without_a_lost_probability_the_stated_belief_is_the_gaussian() -> None:
@@ -293,13 +293,23 @@ def test_em_recovers_the_scale_and_the_lost_probability() -> None:
     assert scale == pytest.approx(1.0, rel=0.05) and weight == pytest.approx(0.2, abs=0.02)
 
 
+def test_the_stated_inputs_follow_the_chosen_settings_and_the_fit_records_them() -> None:
+    predictions = _lost_predictions(200, lost=0.2)
+    chosen = StatedParams(not_found_sigma=2.0, search_max_looks=8, arena_grid_spacing=0.2)
+    inputs = stated_inputs(predictions, ARENA, chosen)
+    assert inputs.looks.max_looks == 8 and inputs.looks.truth_looks.max() <= 8
+    assert inputs.looks.cell_area == pytest.approx(0.04)  # 900 points of 0.2 m in the 6 m square
+    fitted = fit_calibration(predictions, "nll", inputs).stated
+    assert (fitted.not_found_sigma, fitted.search_max_looks, fitted.arena_grid_spacing) == (2.0, 8, 0.2)
+
+
 @pytest.mark.parametrize("criterion", ["nll", "coverage"])
 def test_lost_probabilities_make_a_heavy_tail_honest_where_no_gaussian_scale_can(criterion: str) -> None:
     fit_on, test_on = _lost_predictions(3000, lost=0.2, seed=1), _lost_predictions(3000, lost=0.2, seed=2)
     gaussian = fit_calibration(fit_on, criterion)
-    lost = fit_calibration(fit_on, criterion, stated_inputs(fit_on, ARENA, 1.0))
+    lost = fit_calibration(fit_on, criterion, stated_inputs(fit_on, ARENA, StatedParams()))
     assert gaussian.stated.lost_own == 0.0 and lost.stated.lost_own == pytest.approx(0.2, abs=0.04)
-    shares = stated_inputs(test_on, ARENA, 1.0)
+    shares = stated_inputs(test_on, ARENA, StatedParams())
 
     def worst(calibration: FittedCalibration) -> float:
         coverage = calibrated_metrics(test_on, calibration, shares)["stated"]["coverage"]["objects_seen"]

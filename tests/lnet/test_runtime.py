@@ -214,6 +214,25 @@ def test_the_tracking_rule_follows_the_calibration_and_a_mismatch_is_one_clear_e
     assert tuned.identity != runner.identity
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True, "gate": 9.21}))
     assert load_lnet(checkpoint).identity == runner.identity
+    # the search belief's look cap and the arena grid's spacing: absent, the defaults (a profile at its defaults
+    # loads a calibration from before them); recorded, read back and checked; the stated belief's settings are no
+    # part of the identity
+    defaults = LNetParams(model=config, data_association=True).chosen_settings()
+    assert load_lnet(checkpoint, chosen=defaults).fitted.stated.search_max_looks == 64
+    with pytest.raises(MorError, match=r"with search_max_looks 64 but this run's is 8 \(lnet.search_max_looks\)"):
+        load_lnet(checkpoint, chosen={**defaults, "search_max_looks": 8})
+    with pytest.raises(MorError, match="fitted with arena_grid_spacing 0.1 but this run's is 0.2"):
+        load_lnet(checkpoint, chosen={**defaults, "arena_grid_spacing": 0.2})
+    searched = {"data_association": True, "search_max_looks": 8, "arena_grid_spacing": 0.2}
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, **searched}))
+    coarse = load_lnet(checkpoint, chosen=searched)
+    assert (coarse.fitted.stated.search_max_looks, coarse.fitted.stated.arena_grid_spacing) == (8, 0.2)
+    assert coarse.identity == runner.identity
+    with pytest.raises(MorError, match="fitted with search_max_looks 8 but this run's is 64"):
+        load_lnet(checkpoint, chosen=defaults)
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "search_max_looks": 8.5}))
+    with pytest.raises(MorError, match="search_max_looks must be an integer"):
+        load_lnet(checkpoint)
     # the measurement noise the calibration was fitted with is the one tracked with; another calibration, another
     # identity (a policy trained through the first is stale for the second)
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True, "noise_own": 0.5,

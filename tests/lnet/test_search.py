@@ -21,6 +21,7 @@ from mor.lnet.stated import StatedParams, not_found
 from mor.sim.arena import Arena
 
 ARENA = Arena.build("square", 6.0)
+SPACING, MAX_LOOKS = StatedParams.arena_grid_spacing, StatedParams.search_max_looks  # the defaults: 0.1 m, 64
 
 
 def test_in_view_is_the_cameras_60_degree_cone_at_any_distance() -> None:
@@ -32,10 +33,10 @@ def test_in_view_is_the_cameras_60_degree_cone_at_any_distance() -> None:
 
 
 def test_look_counts_accumulate_over_the_episode() -> None:
-    grid = arena_grid(ARENA)
+    grid = arena_grid(ARENA, SPACING)
     truth = np.array([[[2.0, 0.0]], [[2.0, 0.0]], [[2.0, 0.0]]])          # (T, K=1, 2): straight ahead at first
     heading = np.array([0.0, np.pi, 0.0])
-    histogram, truth_looks = episode_looks(grid, np.zeros((3, 2)), heading, truth)
+    histogram, truth_looks = episode_looks(grid, np.zeros((3, 2)), heading, truth, MAX_LOOKS)
     assert truth_looks[:, 0].tolist() == [1, 1, 2]
     assert histogram.sum(1).tolist() == [len(grid)] * 3
     assert histogram[0, 0] > histogram[0, 1] > 0 and histogram[2, 2] == histogram[0, 1]  # the same cone twice
@@ -84,8 +85,8 @@ def test_not_found_is_a_belief_wider_than_the_chosen_width() -> None:
 def test_the_streaming_search_map_counts_what_the_episode_looks_count() -> None:
     rng = np.random.default_rng(1)
     agent_xy, heading = rng.uniform(-2.0, 2.0, (6, 2)), rng.uniform(-np.pi, np.pi, 6)
-    histogram, _ = episode_looks(arena_grid(ARENA), agent_xy, heading, np.zeros((6, 1, 2)))
-    search = SearchMap(ARENA, n_envs=2)
+    histogram, _ = episode_looks(arena_grid(ARENA, SPACING), agent_xy, heading, np.zeros((6, 1, 2)), MAX_LOOKS)
+    search = StatedParams().search_map(ARENA, n_envs=2)
     for t in range(6):
         search.update(np.stack([agent_xy[t], agent_xy[0]]), np.array([heading[t], heading[0]]))
         assert np.bincount(search.counts[0], minlength=65).tolist() == histogram[t].tolist()
@@ -95,3 +96,19 @@ def test_the_streaming_search_map_counts_what_the_episode_looks_count() -> None:
     assert density[1].min() < density[1].max()                             # looked-at places are less likely
     search.reset(np.array([False, True]))
     assert search.counts[1].sum() == 0 and search.counts[0].sum() > 0
+
+
+def test_a_smaller_look_cap_and_a_coarser_grid_take_effect() -> None:
+    grid = arena_grid(ARENA, 0.5)
+    assert len(grid) == 144                                                # (6 m / 0.5 m)^2 points
+    truth = np.tile([[[2.0, 0.0]]], (10, 1, 1))                             # straight ahead, 10 frames
+    histogram, truth_looks = episode_looks(grid, np.zeros((10, 2)), np.zeros(10), truth, 8)
+    assert histogram.shape == (10, 9) and truth_looks[:, 0].tolist() == [*range(1, 9), 8, 8]
+    every_count = SearchLooks(histogram, np.arange(9)[None].repeat(10, 0), np.zeros((10, 9)), 0.25)
+    assert every_count.max_looks == 8                                      # the weights have 9 bins: a density
+    assert np.allclose((np.exp(search_log_density(every_count, 0.5)) * histogram * 0.25).sum(1), 1.0)
+    search = SearchMap(ARENA, 1, 8, 0.5)
+    for _ in range(10):
+        search.update(np.zeros((1, 2)), np.zeros(1))
+    assert search.counts.max() == 8 and np.bincount(search.counts[0], minlength=9).tolist() == histogram[-1].tolist()
+    assert np.allclose(search.density(0.5).sum(1) * search.cell_area, 1.0) and search.cell_area == 0.25

@@ -13,7 +13,6 @@ from mor.lnet.calibration_file import FittedCalibration
 from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig
 from mor.lnet.runtime import LNetRunner
-from mor.lnet.search import SearchMap
 from mor.lnet.stated import Estimates, StatedParams
 from mor.lnet.streaming import StreamingTracker, stack_frames
 from mor.sim.arena import Arena
@@ -90,7 +89,7 @@ def test_the_double_step_across_an_episode_end_gives_each_env_the_state_of_its_o
 def test_given_the_arena_a_stream_keeps_each_envs_looks_for_the_search_density(find: float | None) -> None:
     runner = _runner(StatedParams(search_find=find))
     a, b, c = _frames(4, seed=0), _frames(4, seed=1), _frames(1, seed=2)
-    stream, maps = StreamingTracker(runner, 2, ARENA), [SearchMap(ARENA, 1) for _ in range(2)]
+    stream, maps = StreamingTracker(runner, 2, ARENA), [runner.fitted.stated.search_map(ARENA, 1) for _ in range(2)]
 
     def look(estimates: Estimates, envs: range = range(2)) -> None:
         for i in envs:  # the estimated poses (the calibration leaves the means alone)
@@ -110,3 +109,8 @@ def test_given_the_arena_a_stream_keeps_each_envs_looks_for_the_search_density(f
     else:
         assert now.search_density.shape == (2, len(maps[0].grid)) and now.search_density.dtype == np.float32
         np.testing.assert_allclose(now.search_density, np.concatenate([m.density(find) for m in maps]), rtol=1e-6)
+
+
+def test_the_streams_looks_follow_the_calibrations_look_cap_and_grid() -> None:
+    stream = StreamingTracker(_runner(StatedParams(search_max_looks=8, arena_grid_spacing=0.5)), 1, ARENA)
+    assert stream.search.max_looks == 8 and len(stream.search.grid) == 144  # (6 m / 0.5 m)^2 points

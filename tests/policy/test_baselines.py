@@ -11,10 +11,13 @@ from mor.eval.methods import METHODS
 from mor.eval.protocol import decider, sim_of
 from mor.policy.baselines import BaselineExtractor, BaselineObservation, baseline_inputs
 from mor.policy.envs import make_task_env
+from mor.policy.params import ObservationParams
 from mor.policy.signature import PolicySignature
 from mor.policy.variants import VARIANTS
 from mor.sim.config import SimConfig
 from mor.sim.geometry import bearing
+
+FEATURES = ObservationParams()  # the default policy.observation settings
 
 SIM = SimConfig(n_objects=3, image_size=32)
 
@@ -89,6 +92,6 @@ def test_the_evaluation_encoding_equals_the_training_wrapper() -> None:
 
 
 def test_the_object_order_rule_takes_the_object_after_the_last() -> None:
-    decide = decider(METHODS["baseline_img"], None, None)
+    decide = decider(METHODS["baseline_img"], None, None, FEATURES)
     targets = np.zeros((3, 3, 2))
     assert decide(None, np.array([3, 3, 3]), targets, np.array([-1, 0, 2])).tolist() == [0, 1, 0]

@@ -13,12 +13,14 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 from mor.errors import ConfigError
 from mor.policy.batched_env import BatchedPoseVecEnv
 from mor.policy.envs import make_training_env
-from mor.policy.features import feature_names
+from mor.policy.features import ObservationLayout, feature_names
 from mor.policy.observations import GroundTruthTracker, PoseObservation
-from mor.policy.params import PPOParams
+from mor.policy.params import ObservationParams, PPOParams
 from mor.policy.variants import GROUND_TRUTH
 from mor.sim.config import SimConfig
 from mor.sim.rules import N_ACTIONS
+
+FEATURES = ObservationParams()  # the default policy.observation settings
 
 ENV_IDS = {"pick": "MOR/Pick-v0", "drop": "MOR/Drop-v0"}
 TOLERANCE = {"rtol": 1e-6, "atol": 1e-6}  # float32
@@ -27,7 +29,7 @@ TOLERANCE = {"rtol": 1e-6, "atol": 1e-6}  # float32
 def _per_env(task: str, sim: SimConfig, n_envs: int, uncertainty: bool, horizon: int | None) -> DummyVecEnv:
     return DummyVecEnv([lambda: PoseObservation(
         gym.make(ENV_IDS[task], render_frames=False, horizon=horizon, **sim.model_dump()).unwrapped,
-        GroundTruthTracker(), uncertainty)] * n_envs)
+        GroundTruthTracker(), ObservationLayout(uncertainty))] * n_envs)
 
 
 def _one_line(error: pytest.ExceptionInfo, *names: str) -> None:
@@ -46,9 +48,9 @@ def test_same_seeds_and_actions_give_the_per_env_steps(task, shape, n_objects, u
     DROP, obstructions, truncations) and a re-seeding as ``mor.policy.train`` does at each chunk."""
     sim, n_envs = SimConfig(arena=shape, n_objects=n_objects), 6
     reference = _per_env(task, sim, n_envs, uncertainty, horizon)
-    batched = BatchedPoseVecEnv(task, sim, n_envs, uncertainty, horizon)
+    batched = BatchedPoseVecEnv(task, sim, n_envs, ObservationLayout(uncertainty), horizon)
     assert batched.observation_space == reference.observation_space
-    assert batched.observation_space.shape == (len(feature_names(task, n_objects, uncertainty)),)
+    assert batched.observation_space.shape == (len(feature_names(task, n_objects, ObservationLayout(uncertainty))),)
     rng = np.random.default_rng(0)
     ends = {"terminated": 0, "truncated": 0}
     for seed in (3, 1000):
@@ -102,9 +104,9 @@ def test_maskable_ppo_learns_on_it_unchanged() -> None:
 
 def test_training_env_is_batched_when_asked() -> None:
     params = PPOParams(n_envs=3, vec_env="batched")
-    env = make_training_env("pick", GROUND_TRUTH, SimConfig(), params)
+    env = make_training_env("pick", GROUND_TRUTH, SimConfig(), params, FEATURES)
     assert isinstance(env, BatchedPoseVecEnv) and env.num_envs == 3
-    assert isinstance(make_training_env("pick", GROUND_TRUTH, SimConfig(), PPOParams(n_envs=2)), DummyVecEnv)
+    assert isinstance(make_training_env("pick", GROUND_TRUTH, SimConfig(), PPOParams(n_envs=2), FEATURES), DummyVecEnv)
 
 
 @pytest.mark.parametrize("n_envs", [0, -2, 2.5, True])
@@ -153,8 +155,9 @@ def test_training_on_it_gives_the_weights_and_log_of_the_per_env_path(tmp_path) 
         params = PPOParams(steps=192, n_envs=4, n_steps=16, batch_size=32, n_epochs=2, hidden=[16, 16],
                            checkpoint_every=64, vec_env=vec_env)
         out = tmp_path / vec_env
-        train_policy(lambda p=params: make_training_env("pick", GROUND_TRUTH, sim, p), params,
-                     PolicySignature.of("pick", GROUND_TRUTH, 2, "square", None), out, 0, vec_env, progress=False)
+        train_policy(lambda p=params: make_training_env("pick", GROUND_TRUTH, sim, p, FEATURES), params,
+                     PolicySignature.of("pick", GROUND_TRUTH, 2, "square", None,
+                                        FEATURES), out, 0, vec_env, progress=False)
         runs[vec_env] = (load_policy_file(out / "policy.pth").state_dict(), (out / "log.csv").read_text())
     (dummy_weights, dummy_log), (batched_weights, batched_log) = runs["dummy"], runs["batched"]
     untimed = lambda log: [[v for k, v in zip(log.splitlines()[0].split(","), line.split(","), strict=True)  # noqa: E731

@@ -11,15 +11,18 @@ import pytest
 
 from mor.errors import ConfigError
 from mor.policy.envs import make_policy_env, make_training_env
+from mor.policy.features import ObservationLayout
 from mor.policy.hierarchy import HierarchicalRearrange, nearest_unfixed, skill_mask
 from mor.policy.observations import GroundTruthTracker
-from mor.policy.params import PPOParams
+from mor.policy.params import ObservationParams, PPOParams
 from mor.policy.signature import PolicySignature, check_signature, write_signature
 from mor.policy.train import train_policy
+from mor.policy.variants import VARIANTS
 from mor.sim.config import SimConfig
 from mor.sim.oracle import Oracle
 from mor.sim.rules import Action, WorldState
-from mor.policy.variants import VARIANTS
+
+FEATURES = ObservationParams()  # the default policy.observation settings
 
 SIM = SimConfig(n_objects=2, image_size=16)
 TINY_PPO = PPOParams(steps=64, n_envs=2, n_steps=16, batch_size=16, n_epochs=1, hidden=[8, 8], checkpoint_every=32)
@@ -52,7 +55,7 @@ def test_skill_masks_remove_what_the_subtasks_remove() -> None:
 
 def test_one_decision_runs_the_pick_skill_then_the_drop_skill() -> None:
     pick, drop = OracleSkill("pick"), OracleSkill("drop")
-    env = make_policy_env("decision", SIM, GroundTruthTracker(), True, (pick, drop))
+    env = make_policy_env("decision", SIM, GroundTruthTracker(), ObservationLayout(), (pick, drop))
     assert isinstance(env, HierarchicalRearrange)
     pick.env = drop.env = env
     env.reset(seed=1)
@@ -66,7 +69,7 @@ def test_one_decision_runs_the_pick_skill_then_the_drop_skill() -> None:
 
 def test_the_nearest_rule_with_oracle_skills_solves_the_task() -> None:
     pick, drop = OracleSkill("pick"), OracleSkill("drop")
-    env = make_policy_env("decision", SIM, GroundTruthTracker(), True, (pick, drop))
+    env = make_policy_env("decision", SIM, GroundTruthTracker(), ObservationLayout(), (pick, drop))
     pick.env = drop.env = env
     solved = 0
     for seed in range(3):
@@ -82,8 +85,8 @@ def test_the_nearest_rule_with_oracle_skills_solves_the_task() -> None:
 
 
 def test_training_writes_its_outputs_and_resumes_from_the_checkpoint(tmp_path: Path) -> None:
-    signature = PolicySignature.of("pick", VARIANTS["gt_pose"], 2, "square", None)
-    make = lambda params: lambda: make_training_env("pick", VARIANTS["gt_pose"], SIM, params)  # noqa: E731
+    signature = PolicySignature.of("pick", VARIANTS["gt_pose"], 2, "square", None, FEATURES)
+    make = lambda params: lambda: make_training_env("pick", VARIANTS["gt_pose"], SIM, params, FEATURES)  # noqa: E731
     first = train_policy(make(TINY_PPO), TINY_PPO, signature, tmp_path, 0, "pick", progress=False)
     assert first["steps"] == 64
     for name in ("checkpoint.pt", "policy.pth", "meta.json", "log.csv", "learning_curve.png", "summary.json"):
@@ -94,18 +97,22 @@ def test_training_writes_its_outputs_and_resumes_from_the_checkpoint(tmp_path: P
     with (tmp_path / "log.csv").open() as handle:
         steps = [int(row["steps"]) for row in csv.DictReader(handle)]
     assert steps == sorted(steps) and steps[-1] == 128 and steps[0] < 64  # appended, not restarted
-    other = PolicySignature.of("pick", VARIANTS["gt_pose"], 2, "polygon", None)  # e.g. another world or another L-Net
+    other = PolicySignature.of("pick", VARIANTS["gt_pose"], 2, "polygon", None,
+                               FEATURES)  # e.g. another world or another L-Net
     with pytest.raises(ConfigError, match=r"checkpoint.pt: not resumed.*arena='square' but this run needs 'polygon'"):
         train_policy(make(longer), longer, other, tmp_path, 0, "pick", progress=False)
 
 
 def test_a_policy_of_another_layout_is_one_clear_error(tmp_path: Path) -> None:
-    write_signature(tmp_path / "meta.json", PolicySignature.of("pick", VARIANTS["gt_pose"], 3, "square", None))
+    write_signature(tmp_path / "meta.json", PolicySignature.of("pick", VARIANTS["gt_pose"], 3, "square", None,
+                                                               FEATURES))
     with pytest.raises(ConfigError, match=r"n_objects=3 but this run needs 2"):
-        check_signature(tmp_path / "meta.json", PolicySignature.of("pick", VARIANTS["gt_pose"], 2, "square", None))
-    write_signature(tmp_path / "meta.json", PolicySignature.of("pick", VARIANTS["lnet"], 2, "square", "abc"))
+        check_signature(tmp_path / "meta.json", PolicySignature.of("pick", VARIANTS["gt_pose"], 2, "square", None,
+                                                                   FEATURES))
+    write_signature(tmp_path / "meta.json", PolicySignature.of("pick", VARIANTS["lnet"], 2, "square", "abc", FEATURES))
     with pytest.raises(ConfigError, match=r"lnet_version='abc' but this run needs 'def'"):
-        check_signature(tmp_path / "meta.json", PolicySignature.of("pick", VARIANTS["lnet"], 2, "square", "def"))
+        check_signature(tmp_path / "meta.json", PolicySignature.of("pick", VARIANTS["lnet"], 2, "square", "def",
+                                                                   FEATURES))
     assert json.loads((tmp_path / "meta.json").read_text())["variant"] == "lnet"
 
 
@@ -121,7 +128,7 @@ def test_the_policy_benchmark_measures_every_path_in_one_run() -> None:
     torch.manual_seed(0)
     runner = LNetRunner(LNet(LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)), FittedCalibration(), 16,
                         "test")
-    result = bench_policy(SIM, TINY_PPO, runner, seconds=0.2, repeats=1, progress=False)
+    result = bench_policy(SIM, TINY_PPO, FEATURES, runner, seconds=0.2, repeats=1, progress=False)
     assert set(result["steps_per_second"]) == {f"{kind}_{name}" for kind in ("env", "ppo")
                                                for name in ("gt_pose", "gt_pose_per_env", "lnet", "lnet_subproc")
                                                } | {"env_gt_pose_n64"}

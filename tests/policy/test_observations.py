@@ -13,19 +13,20 @@ from gymnasium.utils.env_checker import check_env as gymnasium_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 from stable_baselines3.common.vec_env import DummyVecEnv
 
+from mor.errors import ConfigError
 from mor.lnet.calibration_file import FittedCalibration
 from mor.lnet.model import LNet
 from mor.lnet.params import LNetConfig
 from mor.lnet.runtime import LNetRunner
-from mor.errors import ConfigError
 from mor.policy.baselines import BaselineObservation
 from mor.policy.belief import PoseBelief
 from mor.policy.envs import make_policy_env, make_task_env, variant_sim
-from mor.policy.features import feature_names, observation_vector
-from mor.policy.names import TASKS
-from mor.policy.variants import POSE_VARIANTS, VARIANTS
+from mor.policy.features import ObservationLayout, feature_names, observation_vector
 from mor.policy.lnet_tracking import LNetTracker, LNetVecObservation
+from mor.policy.names import TASKS
 from mor.policy.observations import GroundTruthTracker
+from mor.policy.params import ObservationParams
+from mor.policy.variants import POSE_VARIANTS, VARIANTS
 from mor.sim.arena import Arena
 from mor.sim.config import SimConfig
 from mor.sim.rules import Action
@@ -42,15 +43,15 @@ def _belief(agent=(0.0, 0.0, 0.0), objects=((2.0, 0.0), (0.0, 1.0))) -> PoseBeli
 @pytest.mark.parametrize("uncertainty", [True, False])
 def test_the_vector_has_one_entry_per_named_feature(task: str, uncertainty: bool) -> None:
     goal = {"pick": np.array([1]), "drop": np.array([[1.0, 1.0]]), "decision": np.zeros((1, 2, 2))}[task]
-    vector = observation_vector(_belief(), np.array([2]), task, goal, uncertainty, ARENA)
-    assert vector.shape == (1, len(feature_names(task, 2, uncertainty)))
+    vector = observation_vector(_belief(), np.array([2]), task, goal, ObservationLayout(uncertainty), ARENA)
+    assert vector.shape == (1, len(feature_names(task, 2, ObservationLayout(uncertainty))))
     assert vector.dtype == np.float32
 
 
 def test_egocentric_goal_features_are_distance_and_bearing_in_the_agent_frame() -> None:
     belief = _belief(agent=(0.0, 0.0, np.pi / 2))  # facing north (+y)
-    vector = observation_vector(belief, np.array([2]), "pick", np.array([1]), False, ARENA)[0]
-    named = dict(zip(feature_names("pick", 2, False), vector, strict=True))
+    vector = observation_vector(belief, np.array([2]), "pick", np.array([1]), ObservationLayout(False), ARENA)[0]
+    named = dict(zip(feature_names("pick", 2, ObservationLayout(False)), vector, strict=True))
     assert named["goal_distance"] == pytest.approx(1.0)  # object 1 at (0, 1): straight ahead
     assert named["goal_cos_bearing"] == pytest.approx(1.0)
     assert named["object0_sin_bearing"] == pytest.approx(-1.0, abs=1e-6)  # object 0 at (2, 0): to the right
@@ -60,8 +61,9 @@ def test_covariances_are_rotated_into_the_agent_frame() -> None:
     truth = _belief(agent=(0.0, 0.0, np.pi / 2))
     belief = PoseBelief(truth.agent_mean, np.array([[[4.0, 0.0], [0.0, 1.0]]], np.float32), truth.heading,
                         np.array([0.25], np.float32), truth.object_mean, np.zeros((1, 2, 2, 2), np.float32))
-    named = dict(zip(feature_names("drop", 2, True),
-                     observation_vector(belief, np.array([2]), "drop", np.array([[1.0, 1.0]]), True, ARENA)[0],
+    named = dict(zip(feature_names("drop", 2, ObservationLayout()),
+                     observation_vector(belief, np.array([2]), "drop", np.array([[1.0, 1.0]]), ObservationLayout(),
+                                        ARENA)[0],
                      strict=True))
     assert named["agent_sigma_forward"] == pytest.approx(1.0)  # world y is forward when facing north
     assert named["agent_sigma_left"] == pytest.approx(2.0)
@@ -69,10 +71,10 @@ def test_covariances_are_rotated_into_the_agent_frame() -> None:
 
 
 def test_ground_truth_observations_render_nothing_and_carry_zero_uncertainty() -> None:
-    env = make_policy_env("pick", SIM, GroundTruthTracker(), uncertainty=True)
+    env = make_policy_env("pick", SIM, GroundTruthTracker(), ObservationLayout())
     vector, info = env.reset(seed=3)
     assert env.unwrapped._scene is None  # the fast path never builds the MuJoCo scene
-    named = dict(zip(feature_names("pick", 2, True), vector, strict=True))
+    named = dict(zip(feature_names("pick", 2, ObservationLayout()), vector, strict=True))
     assert named["agent_x"] == pytest.approx(info["agent_pose"][0])
     assert named["agent_sigma_forward"] == 0.0 and named["goal_sigma_left"] == 0.0
     env.close()
@@ -88,9 +90,10 @@ def test_the_batched_lnet_wrapper_equals_one_tracker_per_env_across_episode_ends
     """One forward per vector step (two when an episode ends) gives what a per-env tracker gives, terminal
     observations included."""
     runner, n_envs, steps = _runner(), 2, 40
-    vec = LNetVecObservation(DummyVecEnv([lambda: make_task_env("pick", SIM, True)] * n_envs), runner, "pick", 2, True)
+    vec = LNetVecObservation(DummyVecEnv([lambda: make_task_env("pick", SIM, True)] * n_envs), runner, "pick", 2,
+                             ObservationLayout())
     vec.seed(7)
-    singles = [make_policy_env("pick", SIM, LNetTracker(runner), uncertainty=True) for _ in range(n_envs)]
+    singles = [make_policy_env("pick", SIM, LNetTracker(runner), ObservationLayout()) for _ in range(n_envs)]
     batched = vec.reset()
     single = [env.reset(seed=7 + i)[0] for i, env in enumerate(singles)]
     rng, ends = np.random.default_rng(0), 0
@@ -110,23 +113,42 @@ def test_the_batched_lnet_wrapper_equals_one_tracker_per_env_across_episode_ends
 
 
 def test_clearance_is_the_free_distance_to_walls_and_floor_objects_but_not_the_held_one() -> None:
-    from mor.policy.clearance import RAY_ANGLES, clearance
+    from mor.policy.clearance import clearance
     from mor.sim.catalog import OBJECT_RADIUS
     from mor.sim.rules import AGENT_RADIUS
 
-    ahead = int(np.flatnonzero(RAY_ANGLES == 0.0)[0])
+    rays = ObservationParams().clearance_rays_deg
+    ahead = rays.index(0.0)
+
+    def free(belief: PoseBelief, held: int) -> np.ndarray:
+        return clearance(belief, np.array([held]), ARENA, rays, 3.0)[0]
+
     belief = _belief(agent=(0.0, 0.0, 0.0), objects=((1.0, 0.0), (0.0, 2.0)))
-    free = clearance(belief, np.array([2]), ARENA)[0]
-    assert free[ahead] == pytest.approx(1.0 - AGENT_RADIUS - OBJECT_RADIUS)
-    carried = clearance(belief, np.array([0]), ARENA)[0]  # object 0 is held: the ray reaches the east wall
+    assert free(belief, 2)[ahead] == pytest.approx(1.0 - AGENT_RADIUS - OBJECT_RADIUS)
+    carried = free(belief, 0)  # object 0 is held: the ray reaches the east wall
     assert carried[ahead] == pytest.approx(min(3.0 - AGENT_RADIUS, 3.0))
-    near_wall = clearance(_belief(agent=(2.5, 0.0, 0.0)), np.array([2]), ARENA)[0]
-    assert near_wall[ahead] == pytest.approx(0.5 - AGENT_RADIUS)
+    assert free(_belief(agent=(2.5, 0.0, 0.0)), 2)[ahead] == pytest.approx(0.5 - AGENT_RADIUS)
+
+
+def test_the_rays_and_their_cut_are_the_profiles_settings() -> None:
+    """policy.observation's rays name and fill the clearance entries; its cut caps them."""
+    settings = ObservationParams(clearance_rays_deg=[0.0, 90.0, 180.0], clearance_max_m=1.5)
+    layout = ObservationLayout(features=settings)
+    belief = _belief(agent=(0.0, 0.0, 0.0), objects=((1.0, 0.0), (0.0, 2.0)))
+    named = dict(zip(feature_names("drop", 2, layout),
+                     observation_vector(belief, np.array([2]), "drop", np.array([[1.0, 1.0]]), layout, ARENA)[0],
+                     strict=True))
+    assert [name for name in named if name.startswith("clearance_")] == \
+        ["clearance_+0deg", "clearance_+90deg", "clearance_+180deg"]
+    assert named["clearance_+180deg"] == pytest.approx(1.5)  # 3 m to the west wall, cut at 1.5
+    assert named["clearance_+0deg"] < 1.0  # object 0 ahead
+    with pytest.raises(ValueError, match="distinct"):
+        ObservationParams(clearance_rays_deg=[0.0, 0.0])
 
 
 def test_a_task_that_is_not_a_policys_names_the_policies_and_a_policy_is_not_a_world_task() -> None:
     with pytest.raises(ConfigError, match=r"^task: 'rearrange' is not a policy; choose one of pick, drop, decision$"):
-        make_policy_env("rearrange", SIM, GroundTruthTracker(), uncertainty=True)
+        make_policy_env("rearrange", SIM, GroundTruthTracker(), ObservationLayout())
     with pytest.raises(ConfigError, match=r"^task: 'decision' is not one of the world's tasks; choose one of pick, "
                                           r"drop, rearrange$"):
         make_task_env("decision", SIM, render_frames=False)
@@ -148,17 +170,17 @@ def _policy_envs() -> dict[str, Callable[[], gym.Env]]:
     untrained L-Net), the decision's over untrained skills, and each baseline's."""
     envs: dict[str, Callable[[], gym.Env]] = {}
     arena = Arena.build(SIM.arena, SIM.arena_size)
-    trackers = {"gt_pose": (GroundTruthTracker, True, False), "lnet": (lambda: LNetTracker(_runner()), True, False),
-                "lnet_no_uncertainty": (lambda: LNetTracker(_runner()), False, False),
-                "lnet_search": (lambda: LNetTracker(_runner(), arena), True, True)}
+    trackers = {"gt_pose": GroundTruthTracker, "lnet": lambda: LNetTracker(_runner()),
+                "lnet_no_uncertainty": lambda: LNetTracker(_runner()),
+                "lnet_search": lambda: LNetTracker(_runner(), arena)}
     assert set(trackers) == set(POSE_VARIANTS)
-    for variant, (tracker, uncertainty, search) in trackers.items():
+    for variant, tracker in trackers.items():
+        layout = ObservationLayout.of(VARIANTS[variant], ObservationParams())
         for task in ("pick", "drop"):
-            envs[f"{variant}-{task}"] = lambda t=task, m=tracker, u=uncertainty, s=search: make_policy_env(
-                t, SIM, m(), u, search=s)
-        if uncertainty:
-            envs[f"{variant}-decision"] = lambda m=tracker, s=search: make_policy_env(
-                "decision", SIM, m(), True, (_EndingSkill(Action.PICK), _EndingSkill(Action.DROP)), search=s)
+            envs[f"{variant}-{task}"] = lambda t=task, m=tracker, lay=layout: make_policy_env(t, SIM, m(), lay)
+        if layout.uncertainty:
+            envs[f"{variant}-decision"] = lambda m=tracker, lay=layout: make_policy_env(
+                "decision", SIM, m(), lay, (_EndingSkill(Action.PICK), _EndingSkill(Action.DROP)))
     for variant in (v for v in VARIANTS.values() if v.is_baseline):
         for task in ("pick", "drop"):
             envs[f"{variant.name}-{task}"] = lambda t=task, v=variant: BaselineObservation(

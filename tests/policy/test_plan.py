@@ -7,30 +7,36 @@ from pathlib import Path
 from typer.testing import CliRunner
 
 from mor.config import load_profile
+from mor.policy.params import ObservationParams
 from mor.policy.plan import training_plan
 from mor.policy.signature import PolicySignature, write_signature
 from mor.policy.variants import VARIANTS
 from pipelines.cli import app
 from pipelines.settings import setting_profile
 
+FEATURES = ObservationParams()  # the default policy.observation settings
+
 
 def test_the_lnet_variants_fine_tune_gt_pose_for_lnet_steps_and_gt_pose_starts_afresh(tmp_path: Path) -> None:
     profile = load_profile("default")
-    gt_pose = training_plan(profile, VARIANTS["gt_pose"], ("pick", "drop", "decision"), tmp_path / "own", tmp_path / "main")
+    gt_pose = training_plan(profile, VARIANTS["gt_pose"], ("pick", "drop", "decision"), tmp_path / "own",
+                            tmp_path / "main")
     assert [(p.task, p.params.steps, p.start) for p in gt_pose] == [
         ("pick", profile.policy.pick.steps, None), ("drop", profile.policy.drop.steps, None),
         ("decision", profile.policy.decision.steps, None)]
     lnet = training_plan(profile, VARIANTS["lnet"], ("pick",), tmp_path / "own", tmp_path / "main")
     assert lnet[0].params.steps == profile.policy.lnet_steps["pick"] != profile.policy.pick.steps
     assert lnet[0].start == tmp_path / "own" / "gt_pose" / "pick" and "lnet_steps" in lnet[0].why
-    assert [p.task for p in training_plan(profile, VARIANTS["baseline_landmark"], ("pick", "drop"), tmp_path, tmp_path)] == \
+    assert [p.task for p in training_plan(profile, VARIANTS["baseline_landmark"], ("pick", "drop"), tmp_path,
+                                          tmp_path)] == \
         ["drop"]  # its Pick is baseline_img's
 
 
 def test_a_setting_fine_tunes_the_main_policies_and_its_own_decision_when_the_objects_differ(tmp_path: Path) -> None:
     profile = setting_profile("objects_4", "default")
     main = tmp_path / "main"
-    write_signature(main / "lnet" / "decision" / "meta.json", PolicySignature.of("decision", VARIANTS["lnet"], 3, "square", "x"))
+    write_signature(main / "lnet" / "decision" / "meta.json", PolicySignature.of("decision", VARIANTS["lnet"], 3,
+                                                                                 "square", "x", FEATURES))
     plans = training_plan(profile, VARIANTS["lnet"], ("pick", "decision"), tmp_path / "own", main)
     assert plans[0].start == main / "lnet" / "pick" and "finetune_from_main" in plans[0].why
     assert plans[1].start == tmp_path / "own" / "gt_pose" / "decision"  # 3 decision actions there, 4 here

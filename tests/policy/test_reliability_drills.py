@@ -17,10 +17,13 @@ import torch
 
 from mor.errors import MorError
 from mor.policy.hierarchy import Skill
+from mor.policy.params import ObservationParams
 from mor.policy.policy_file import load_policy_file, save_policy_file
-from mor.tensor_files import UnsafeFile
 from mor.policy.train import CHECKPOINT_FILE
 from mor.policy.variants import VARIANTS
+from mor.tensor_files import UnsafeFile
+
+FEATURES = ObservationParams()  # the default policy.observation settings
 
 CHILD = textwrap.dedent("""
     import os, signal, sys
@@ -28,7 +31,7 @@ CHILD = textwrap.dedent("""
     import mor.policy.train as train
     from mor.policy.envs import make_training_env
     from mor.policy.hierarchy import Skill
-    from mor.policy.params import PPOParams
+    from mor.policy.params import ObservationParams, PPOParams
     from mor.policy.signature import PolicySignature
     from mor.policy.variants import VARIANTS
     from mor.sim.config import SimConfig
@@ -53,8 +56,10 @@ CHILD = textwrap.dedent("""
                 os.kill(os.getpid(), signal.SIGKILL)
             return step(self)
         train.TrainingMonitor._on_step = step_then_die
-    train.train_policy(lambda: make_training_env(task, VARIANTS["gt_pose"], sim, params, skills=skills), params,
-                       PolicySignature.of(task, VARIANTS["gt_pose"], 2, "square", None), out, 0, "drill", progress=False)
+    features = ObservationParams()
+    train.train_policy(lambda: make_training_env(task, VARIANTS["gt_pose"], sim, params, features, skills=skills),
+                       params, PolicySignature.of(task, VARIANTS["gt_pose"], 2, "square", None, features), out, 0,
+                       "drill", progress=False)
 """)
 
 
@@ -92,7 +97,8 @@ def random_skills(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
     folder = tmp_path_factory.mktemp("skills")
     for task in ("pick", "drop"):
-        env = make_training_env(task, VARIANTS["gt_pose"], SimConfig(n_objects=2, image_size=16), PPOParams(n_envs=1))
+        env = make_training_env(task, VARIANTS["gt_pose"], SimConfig(n_objects=2, image_size=16), PPOParams(n_envs=1),
+                                FEATURES)
         save_policy_file(MaskablePPO("MlpPolicy", env, seed=0, policy_kwargs={"net_arch": [16, 16]}).policy,
                          folder / f"{task}.pth")
         env.close()
@@ -150,13 +156,15 @@ def test_a_crafted_or_cut_training_checkpoint_is_one_error(tmp_path: Path) -> No
     from mor.sim.config import SimConfig
 
     params = PPOParams(steps=32, n_envs=2, n_steps=16, batch_size=16, n_epochs=1, hidden=[8], checkpoint_every=32)
-    signature = PolicySignature.of("pick", VARIANTS["gt_pose"], 2, "square", None)
-    train_policy(lambda: make_training_env("pick", VARIANTS["gt_pose"], SimConfig(n_objects=2, image_size=16), params), params,
+    signature = PolicySignature.of("pick", VARIANTS["gt_pose"], 2, "square", None, FEATURES)
+    train_policy(lambda: make_training_env("pick", VARIANTS["gt_pose"], SimConfig(n_objects=2, image_size=16), params,
+                                           FEATURES), params,
                  signature, tmp_path, 0, "pick", progress=False)
     checkpoint, marker = tmp_path / CHECKPOINT_FILE, tmp_path / "ran"
     longer = params.model_copy(update={"steps": 64})
     retrain = lambda: train_policy(  # noqa: E731
-        lambda: make_training_env("pick", VARIANTS["gt_pose"], SimConfig(n_objects=2, image_size=16), longer), longer,
+        lambda: make_training_env("pick", VARIANTS["gt_pose"], SimConfig(n_objects=2, image_size=16), longer,
+                                  FEATURES), longer,
         signature, tmp_path, 0, "pick", progress=False)
     checkpoint.write_bytes(checkpoint.read_bytes()[:1000])
     with pytest.raises(MorError, match=r"checkpoint.pt: not a readable training checkpoint \(.*cut short or damaged"):
