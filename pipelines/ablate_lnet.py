@@ -7,6 +7,7 @@ from typing import Any
 from mor.config import Profile
 from mor.data.manifest import manifest_version, read_manifest
 from mor.errors import MorError
+from mor.lnet.calibration_file import chosen_calibration
 from mor.lnet.calibration_fit import calibrate
 from mor.lnet.checkpoint import signature
 from mor.lnet.evaluate import metrics
@@ -48,7 +49,8 @@ def run(profile: Profile, study: str, steps: int, episodes: int, pretrain_steps:
         model = load_lnet(out / BEST, device, signature(config, version, summary["image_size"]), calibrated=False).model
         model.use_tracking(TrackingSettings(data_association=profile.lnet.data_association
                                             and config.tracker == "filter", gate=profile.lnet.gate))
-        _, calibration, _, _ = calibrate(model, frame_estimates(model, paths.LEROBOT / "validation", episodes, device))
+        _, calibration, _, _ = calibrate(model, frame_estimates(model, paths.LEROBOT / "validation", episodes, device),
+                                         settings=chosen_calibration(profile.lnet.chosen_settings()).stated)
         test = predict(model, paths.LEROBOT / "test", episodes, device)
         scored = metrics(calibration.scales.apply(test, test.confusable))
         results[name] = {key: scored[key] for key in REPORTED}

@@ -20,7 +20,7 @@ from mor.policy.envs import make_training_env
 from mor.policy.hierarchy import POLICY_FILE, Skill
 from mor.policy.names import TASKS, Task
 from mor.policy.plan import TaskPlan, training_plan
-from mor.policy.signature import PolicySignature, read_signature
+from mor.policy.signature import PolicySignature, warm_start_names
 from mor.policy.train import train_policy
 from mor.data.parallel import unordered_map
 from mor.policy.variants import VARIANTS, Variant, policy_folder, seed_folder
@@ -80,8 +80,6 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
     summaries = []
     for task_plan in plan(profile, variant, tasks, seed):
         task, params, source = task_plan.task, task_plan.params, task_plan.start
-        init_from = None if source is None else (source / POLICY_FILE,
-                                                 read_signature(source / "meta.json").observation)
         skills = None
         if task == "decision":
             skills = tuple(Skill.load(policy_folder(paths.POLICY_CARD, variant.name, name, seed) / POLICY_FILE,
@@ -89,6 +87,8 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
         signature = (PolicySignature.of_baseline(task, variant, sim.n_objects, sim.arena, sim.image_size)
                      if variant.is_baseline else PolicySignature.of(task, variant, sim.n_objects, sim.arena, version,
                                                                    policy.observation))
+        init_from = None if source is None else (source / POLICY_FILE,
+                                                 warm_start_names(source / "meta.json", signature))
         run_dir = policy_folder(paths.POLICIES, variant.name, task, seed)
         summary = train_policy(
             lambda: make_training_env(task, variant, sim, params, policy.observation, runner, skills),  # noqa: B023

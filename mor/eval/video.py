@@ -66,12 +66,14 @@ class _Recorder:
             "object_tril")}
         self.captions: list[str] = []
         self.search: list[np.ndarray | None] = []  # per step the search belief's density (M,) per m², or None
+        self.grid: np.ndarray | None = None  # its grid (M, 2) m, where the tracker states a search belief
 
     def __call__(self, hierarchy: SkillHierarchy) -> None:
         slot, belief = hierarchy.slots[0], hierarchy.belief
-        density = getattr(hierarchy.tracker, "search_density", None)
+        if belief.search is not None:
+            self.grid = belief.search.grid
         searching = belief.object_found is not None and not belief.object_found[0].all()
-        self.search.append(density[0] if density is not None and searching else None)
+        self.search.append(belief.search.density[0] if belief.search is not None and searching else None)
         state = slot.env.unwrapped.state
         self.frames["images"].append(slot.observation["image"])
         self.frames["poses"].append(state.agent_pose.copy())
@@ -118,7 +120,7 @@ def write_policy_video(path: Path, sim: SimConfig, tracker: BatchTracker, skills
         estimate = {key: np.stack(frames[key]) for key in ("agent_mean", "agent_tril", "heading", "kappa",
                                                            "object_mean", "object_tril")}
 
-        grid = getattr(tracker, "search_grid", None)
+        grid = record.grid
         peak = max((float(d.max()) for d in record.search if d is not None), default=0.0)
 
         def annotate(ax: Axes, t: int) -> None:

@@ -77,6 +77,10 @@ class CalibrationParams(ParamsModel):
         "anywhere in the arena: mor.lnet.lost); calibrate-lnet reports every criterion with and without")
 
 
+#: the stated belief's settings a profile chooses rather than the calibration fitting them (``StatedParams.CHOSEN``)
+STATED_SETTINGS: tuple[str, ...] = ("not_found_sigma", "search_max_looks", "arena_grid_spacing")
+
+
 class LNetParams(ParamsModel):
     """Everything the L-Net stages read from a profile."""
 
@@ -114,8 +118,8 @@ class LNetParams(ParamsModel):
     def chosen_settings(self) -> dict[str, Any]:
         """The tracking-time settings this profile chooses, which ``calibrate-lnet`` records and ``load_lnet`` checks
         against the calibration (``mor.lnet.calibration_file.recorded_settings``)."""
-        return {"data_association": self.data_association, "gate": self.gate, "not_found_sigma": self.not_found_sigma,
-                "search_max_looks": self.search_max_looks, "arena_grid_spacing": self.arena_grid_spacing}
+        return {"data_association": self.data_association, "gate": self.gate,
+                **{name: getattr(self, name) for name in STATED_SETTINGS}}
 
     @model_validator(mode="after")
     def _association_needs_the_filter(self) -> LNetParams:

@@ -25,7 +25,7 @@ Shapes: N environments (or frames), n objects (K slots), M arena grid points. Po
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -33,9 +33,22 @@ import torch
 from mor.lnet.calibration import Calibration, confusable
 from mor.lnet.lost import ArenaShares, arena_shares, log_density, region_mass
 from mor.lnet.model import PoseEstimate
+from mor.lnet.params import STATED_SETTINGS, LNetParams
 from mor.lnet.predictions import Predictions
-from mor.lnet.search import SearchLooks, SearchMap, search_log_density, search_looks, search_mass
+from mor.lnet.search import (
+    SearchLooks,
+    SearchMap,
+    search_log_density,
+    search_looks,
+    search_mass,
+)
 from mor.sim.arena import Arena
+
+
+def _chosen_default(name: str) -> Any:
+    """A chosen setting's default: the profile's (``LNetParams``), the one place it is written."""
+    return LNetParams.model_fields[name].default
+
 
 @dataclass(frozen=True)
 class StatedParams:
@@ -49,14 +62,14 @@ class StatedParams:
     lost and search beliefs count (``arena_grid_spacing``)."""
 
     #: The fields a run chooses in its profile rather than the calibration fitting them.
-    CHOSEN: ClassVar[tuple[str, ...]] = ("not_found_sigma", "search_max_looks", "arena_grid_spacing")
+    CHOSEN: ClassVar[tuple[str, ...]] = STATED_SETTINGS
 
     lost_own: float = 0.0
     lost_shared: float | None = None
     search_find: float | None = None
-    not_found_sigma: float = 1.0
-    search_max_looks: int = 64
-    arena_grid_spacing: float = 0.1
+    not_found_sigma: float = _chosen_default("not_found_sigma")
+    search_max_looks: int = _chosen_default("search_max_looks")
+    arena_grid_spacing: float = _chosen_default("arena_grid_spacing")
 
     def lost(self, confusable_mask: np.ndarray) -> np.ndarray:
         """(..., K) float64 the probability that each object's belief is lost, by group: confusable_mask (..., K)

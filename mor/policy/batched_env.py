@@ -1,7 +1,7 @@
 """The ground-truth training path as one SB3 ``VecEnv`` of N Pick or Drop episodes stepped as arrays.
 
-``BatchedPoseVecEnv(task, sim, n_envs)`` gives what ``DummyVecEnv`` of N ``PoseObservation(env,
-GroundTruthTracker())`` gives for the same seeds (``seed()``: slot i gets seed + i) and actions: the same
+``BatchedPoseVecEnv(task, sim, n_envs, layout)`` gives what ``DummyVecEnv`` of N ``PoseObservation(env,
+GroundTruthTracker(), layout)`` gives for the same seeds (``seed()``: slot i gets seed + i) and actions: the same
 observation vectors (``mor.policy.features``, one batched call for all N), rewards, dones and action masks, step by
 step; the world is ``mor.sim.batch_tasks.TaskBatch``. sb3-contrib's MaskablePPO uses it unchanged: its
 ``env_method("action_masks")`` answers with one (N, 5) array.
@@ -49,7 +49,7 @@ class BatchedPoseVecEnv(VecEnv):
     observation (N, D) float32, ``feature_names(task, n, layout)``; reward (N,) float32; done (N,) bool.
     """
 
-    def __init__(self, task: Task, sim: SimConfig, n_envs: int, layout: ObservationLayout = ObservationLayout(),
+    def __init__(self, task: Task, sim: SimConfig, n_envs: int, layout: ObservationLayout,
                  horizon: int | None = None) -> None:
         if task not in BATCHED_TASKS:
             raise ConfigError(f"task: {task!r} has no batched environment; choose pick or drop "

@@ -12,14 +12,14 @@ triple is [σ_forward m, σ_left m, correlation] of a covariance rotated into th
     pick      one-hot goal object (n), polar of the goal object (3)
     drop      goal position x, y (2), polar of the goal position (3)
     decision  each object: target x, y, object-to-target distance, polar of the target   6 n
-- uncertainty (left out when ``uncertainty=False``): the agent's triple and heading σ (4), each object's
+- uncertainty (left out where ``layout.uncertainty`` is False): the agent's triple and heading σ (4), each object's
   triple (3 n), and for pick the goal object's triple (3)
-- the stated belief (only with ``search=True``): each object's found flag and lost probability (2 n), for pick
+- the stated belief (only where ``layout.search``): each object's found flag and lost probability (2 n), for pick
   the goal object's (2), and the search belief's mass around the agent (``mor.policy.search_view``; S sectors x
   rings, default 8 x 2)
 
 The rays and the sectors are ``policy.observation`` in ``params.yaml`` (``ObservationParams``); the layout of a
-variant is ``ObservationLayout.of(variant, params)``.
+variant is ``ObservationLayout.of(variant, profile.policy.observation)``.
 
 The egocentric polar features are computed from the same global belief (they tell the policy nothing new),
 but without them PPO does not learn Pick (docs/assumptions.md, "Policies").
@@ -43,6 +43,10 @@ from mor.policy.variants import Variant
 from mor.sim.arena import Arena
 
 
+#: the ``ObservationParams`` fields that only a layout with the stated belief (``search``) reads
+SEARCH_FIELDS: tuple[str, ...] = ("search_sectors", "search_ring_edges_m")
+
+
 @dataclass(frozen=True)
 class ObservationLayout:
     """What a pose policy's vector holds: the uncertainty entries or not, the stated belief's parts or not, and
@@ -56,6 +60,17 @@ class ObservationLayout:
     def of(cls, variant: Variant, features: ObservationParams) -> ObservationLayout:
         """``variant``'s layout with the profile's ``policy.observation`` settings."""
         return cls(variant.uncertainty, variant.search, features)
+
+    def read_fields(self) -> tuple[str, ...]:
+        """The ``ObservationParams`` fields this layout reads."""
+        return tuple(name for name in ObservationParams.model_fields if self.search or name not in SEARCH_FIELDS)
+
+    def recorded_features(self) -> ObservationParams:
+        """``features`` as a policy's signature records them: the fields this layout does not read at their
+        defaults, so that a setting a policy never reads refuses none of its loads."""
+        defaults = ObservationParams()
+        unread = (name for name in ObservationParams.model_fields if name not in self.read_fields())
+        return self.features.model_copy(update={name: getattr(defaults, name) for name in unread})
 
 
 def feature_names(task: Task, n_objects: int, layout: ObservationLayout) -> list[str]:

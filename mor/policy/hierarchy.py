@@ -335,7 +335,7 @@ class HierarchicalRearrange(gym.Env):
     metadata = {"render_modes": []}
 
     def __init__(self, env: gym.Env, tracker: BatchTracker, pick: Skill, drop: Skill,
-                 layout: ObservationLayout = ObservationLayout(), encode: Encode | None = None) -> None:
+                 layout: ObservationLayout, encode: Encode | None = None) -> None:
         if not isinstance(env.unwrapped, RearrangeEnv):
             raise TypeError(f"HierarchicalRearrange needs MOR/Rearrange-v0, got {type(env.unwrapped).__name__}")
         self.env, self.layout = env, layout

@@ -37,23 +37,17 @@ def belief_from_estimates(estimates: Estimates, search: SearchMap | None = None)
 
 class LNetBatchTracker:
     """N environments' beliefs from the L-Net: one forward pass per ``observe`` (the ``BatchTracker`` protocol).
-    With ``arena`` it keeps the search belief's looks: ``search_density`` (N, M) per m² at ``search_grid`` (M, 2) m
-    after each ``observe`` (None before, without looks, or where the calibration fitted no search belief)."""
+    With ``arena`` it keeps the search belief's looks, and its beliefs carry the search belief (``PoseBelief.search``;
+    None without looks, or where the calibration fitted no search belief)."""
 
     needs_frames = True
 
     def __init__(self, runner: LNetRunner, n_envs: int, arena: Arena | None = None) -> None:
         self.stream = StreamingTracker(runner, n_envs, arena)  # arena: also the search belief's looks
-        self.search_density: np.ndarray | None = None
-
-    @property
-    def search_grid(self) -> np.ndarray | None:
-        return None if self.stream.search is None else self.stream.search.grid
 
     def observe(self, observations: list[dict[str, Any]], infos: list[dict[str, Any]], previous_actions: np.ndarray,
                 starting: np.ndarray) -> PoseBelief:
         estimates = self.stream.step(stack_frames(observations), previous_actions, starting)
-        self.search_density = estimates.search_density
         return belief_from_estimates(estimates, self.stream.search)
 
 

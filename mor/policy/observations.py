@@ -99,12 +99,12 @@ class PoseObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """A MOR env whose observation is the flat policy vector (``mor.policy.features``) of a tracker's belief.
 
     observation_space: Box (D,) float32; ``action_masks()`` is the env's; ``belief``: the tracker's latest belief
-    (``info`` stays the env's plain values); layout: what the vector holds (default: with the uncertainty entries,
-    without the stated belief, the default rays and sectors). Its constructor's arguments are recorded in
+    (``info`` stays the env's plain values); layout: what the vector holds (a variant's:
+    ``ObservationLayout.of(variant, profile.policy.observation)``). Its constructor's arguments are recorded in
     ``spec``, so that ``spec.make()`` (Gymnasium's ``check_env``) builds it again.
     """
 
-    def __init__(self, env: gym.Env, tracker: Tracker, layout: ObservationLayout = ObservationLayout()) -> None:
+    def __init__(self, env: gym.Env, tracker: Tracker, layout: ObservationLayout) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, tracker=tracker, layout=layout)
         super().__init__(env)
         self.task: Task = task_of(env)

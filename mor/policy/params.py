@@ -67,9 +67,18 @@ class ObservationParams(ParamsModel):
     @field_validator("clearance_rays_deg")
     @classmethod
     def _distinct_rays(cls, rays: list[float]) -> list[float]:
-        if len(set(rays)) != len(rays) or not all(-180.0 < ray <= 180.0 for ray in rays):
-            raise ValueError(f"clearance rays must be distinct angles in (-180, 180] degrees; got {rays}")
+        if len({round(ray) for ray in rays}) != len(rays) or not all(-180.0 < ray <= 180.0 for ray in rays):
+            raise ValueError(f"clearance rays must be angles in (-180, 180] degrees at least a whole degree apart "
+                             f"(each feature is named by its rounded angle); got {rays}")
         return rays
+
+    @field_validator("search_sectors")
+    @classmethod
+    def _whole_degree_sectors(cls, sectors: int) -> int:
+        if 360 % sectors:
+            raise ValueError(f"search sectors must divide 360 (each feature is named by its whole-degree bearing); "
+                             f"got {sectors}")
+        return sectors
 
     @field_validator("search_ring_edges_m")
     @classmethod

@@ -9,10 +9,10 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from mor.atomic import atomic_output
 from mor.errors import ConfigError
-from mor.policy.features import ObservationLayout, feature_names
+from mor.policy.features import SEARCH_FIELDS, ObservationLayout, feature_names
 from mor.policy.names import Task
 from mor.policy.params import ObservationParams
-from mor.policy.variants import Variant
+from mor.policy.variants import VARIANTS, Variant
 
 
 class PolicySignature(BaseModel):
@@ -35,9 +35,10 @@ class PolicySignature(BaseModel):
            features: ObservationParams) -> PolicySignature:
         """A pose variant's: its ``feature_names`` in its layout with ``features`` (the profile's
         ``policy.observation``); ``lnet_version`` only where it observes through the L-Net."""
-        names = feature_names(task, n_objects, ObservationLayout.of(variant, features))
-        return cls(task=task, variant=variant.name, n_objects=n_objects, arena=arena, observation=names,
-                   lnet_version=lnet_version if variant.uses_lnet else None, features=features)
+        layout = ObservationLayout.of(variant, features)
+        return cls(task=task, variant=variant.name, n_objects=n_objects, arena=arena,
+                   observation=feature_names(task, n_objects, layout),
+                   lnet_version=lnet_version if variant.uses_lnet else None, features=layout.recorded_features())
 
     @classmethod
     def of_baseline(cls, task: Task, variant: Variant, n_objects: int, arena: str, image_size: int
@@ -62,6 +63,26 @@ def read_signature(path: Path) -> PolicySignature:
     return PolicySignature.model_validate(json.loads(path.read_text()))
 
 
+def warm_start_names(path: Path, signature: PolicySignature) -> list[str]:
+    """The feature names of the policy whose meta.json is ``path``, for ``signature``'s policy to start from
+    (``mor.policy.train.warm_start`` copies weights by name); ConfigError naming the setting where an observation
+    setting that both layouts read differs (the same name would carry another quantity)."""
+    source = read_signature(path)
+    both_search = all(VARIANTS[s.variant].search for s in (source, signature) if s.variant in VARIANTS)
+    fields = tuple(name for name in ObservationParams.model_fields if both_search or name not in SEARCH_FIELDS)
+    _check_features(path, source.features, signature.features, fields)
+    return source.observation
+
+
+def _check_features(path: Path, have: ObservationParams, want: ObservationParams, fields: tuple[str, ...]) -> None:
+    """ConfigError naming the first of ``fields`` (a ``policy.observation`` setting) that differs."""
+    for name in fields:
+        if getattr(have, name) != getattr(want, name):
+            raise ConfigError(f"{path}: the policy was trained with policy.observation.{name}={getattr(have, name)!r} "
+                              f"but this run needs {getattr(want, name)!r}; retrain it (mor policy train) or choose "
+                              "matching settings")
+
+
 #: what a zero-shot evaluation (a policy played in another arena, through that arena's L-Net) may differ in
 ZERO_SHOT_FIELDS = ("arena", "lnet_version")
 
@@ -70,15 +91,12 @@ def check_signature(path: Path, expected: PolicySignature, allow: tuple[str, ...
     """Raise ConfigError naming both sides when the policy at ``path`` (its meta.json) was trained otherwise
     (``allow``: fields that may differ, e.g. ``ZERO_SHOT_FIELDS``)."""
     found = read_signature(path)
-    named = {"features": "policy.observation"}  # the params.yaml key of a signature field, where it has one
-    for field in (f for f in ("task", "variant", "n_objects", "arena", "lnet_version", "features") if f not in allow):
+    for field in (f for f in ("task", "variant", "n_objects", "arena", "lnet_version") if f not in allow):
         have, want = getattr(found, field), getattr(expected, field)
-        if field == "features" and have != want:
-            key = next(k for k in ObservationParams.model_fields if getattr(have, k) != getattr(want, k))
-            field, have, want = f"{named[field]}.{key}", getattr(have, key), getattr(want, key)
         if have != want:
             raise ConfigError(f"{path}: the policy was trained with {field}={have!r} but this run needs {want!r}; "
                               "retrain it (mor policy train) or choose matching settings")
+    _check_features(path, found.features, expected.features, tuple(ObservationParams.model_fields))
     if found.observation != expected.observation:
         raise ConfigError(f"{path}: the policy's observation layout ({len(found.observation)} features) differs from "
                           f"this version's ({len(expected.observation)}); retrain it (mor policy train)")

@@ -75,15 +75,17 @@ class _Searching(RenderingTruthTracker):
         self.found = found
         from mor.lnet.lost import arena_grid  # noqa: PLC0415
 
-        self.search_grid = arena_grid(arena, 0.1)  # the default lnet.arena_grid_spacing (m)
-        self.search_density: np.ndarray | None = None
+        self.grid = arena_grid(arena, 0.1)  # the default lnet.arena_grid_spacing (m)
 
     def observe(self, *args, **kwargs):  # noqa: ANN002, ANN003, ANN201
         from dataclasses import replace  # noqa: PLC0415
 
+        from mor.policy.belief import SearchBelief  # noqa: PLC0415
+
         belief = super().observe(*args, **kwargs)
-        self.search_density = np.ones((1, len(self.search_grid)))
-        return replace(belief, object_found=np.full((1, belief.n_objects), float(self.found), np.float32))
+        search = SearchBelief(np.ones((1, len(self.grid))), self.grid, 0.01, np.array([not self.found]))
+        return replace(belief, object_found=np.full((1, belief.n_objects), float(self.found), np.float32),
+                       search=search)
 
 
 def test_the_video_shades_the_search_belief_where_the_tracker_states_one(tmp_path: Path) -> None:

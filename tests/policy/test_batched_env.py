@@ -21,6 +21,7 @@ from mor.sim.config import SimConfig
 from mor.sim.rules import N_ACTIONS
 
 FEATURES = ObservationParams()  # the default policy.observation settings
+LAYOUT = ObservationLayout()  # gt_pose's layout with them
 
 ENV_IDS = {"pick": "MOR/Pick-v0", "drop": "MOR/Drop-v0"}
 TOLERANCE = {"rtol": 1e-6, "atol": 1e-6}  # float32
@@ -78,7 +79,7 @@ def test_same_seeds_and_actions_give_the_per_env_steps(task, shape, n_objects, u
 
 
 def test_episode_info_counts_return_and_length() -> None:
-    env = BatchedPoseVecEnv("pick", SimConfig(), 4)
+    env = BatchedPoseVecEnv("pick", SimConfig(), 4, LAYOUT)
     env.seed(0)
     env.reset()
     returns, lengths = np.zeros(4), np.zeros(4, int)
@@ -93,7 +94,7 @@ def test_episode_info_counts_return_and_length() -> None:
 
 
 def test_maskable_ppo_learns_on_it_unchanged() -> None:
-    env = BatchedPoseVecEnv("drop", SimConfig(n_objects=2), 8)
+    env = BatchedPoseVecEnv("drop", SimConfig(n_objects=2), 8, LAYOUT)
     assert is_masking_supported(env)
     assert get_action_masks(env).shape == (8, N_ACTIONS)
     model = MaskablePPO("MlpPolicy", env, seed=0, device="cpu", n_steps=16, batch_size=32, n_epochs=1,
@@ -112,20 +113,20 @@ def test_training_env_is_batched_when_asked() -> None:
 @pytest.mark.parametrize("n_envs", [0, -2, 2.5, True])
 def test_fewer_than_one_env_is_one_line(n_envs) -> None:
     with pytest.raises(ConfigError) as error:
-        BatchedPoseVecEnv("pick", SimConfig(), n_envs)
+        BatchedPoseVecEnv("pick", SimConfig(), n_envs, LAYOUT)
     _one_line(error, "n_envs")
 
 
 def test_a_task_without_a_batched_env_is_one_line() -> None:
     with pytest.raises(ConfigError) as error:
-        BatchedPoseVecEnv("decision", SimConfig(), 2)
+        BatchedPoseVecEnv("decision", SimConfig(), 2, LAYOUT)
     _one_line(error, "decision", "pick", "drop")
 
 
 @pytest.mark.parametrize("actions", [np.zeros(3, int), np.zeros((4, 1), int), np.zeros(4), np.zeros(4, bool),
                                      np.array([0, 1, 5, 0]), np.array([0, -1, 2, 0]), [0, 1, 2, 3.5]])
 def test_bad_actions_are_one_line(actions) -> None:
-    env = BatchedPoseVecEnv("pick", SimConfig(), 4)
+    env = BatchedPoseVecEnv("pick", SimConfig(), 4, LAYOUT)
     env.seed(0)
     env.reset()
     with pytest.raises(ValueError) as error:
@@ -134,7 +135,7 @@ def test_bad_actions_are_one_line(actions) -> None:
 
 
 def test_reset_options_are_refused() -> None:
-    env = BatchedPoseVecEnv("pick", SimConfig(), 2)
+    env = BatchedPoseVecEnv("pick", SimConfig(), 2, LAYOUT)
     env.set_options({"n_objects": 2})
     with pytest.raises(ConfigError) as error:
         env.reset()

@@ -142,7 +142,7 @@ def test_the_rays_and_their_cut_are_the_profiles_settings() -> None:
         ["clearance_+0deg", "clearance_+90deg", "clearance_+180deg"]
     assert named["clearance_+180deg"] == pytest.approx(1.5)  # 3 m to the west wall, cut at 1.5
     assert named["clearance_+0deg"] < 1.0  # object 0 ahead
-    with pytest.raises(ValueError, match="distinct"):
+    with pytest.raises(ValueError, match="a whole degree apart"):
         ObservationParams(clearance_rays_deg=[0.0, 0.0])
 
 

@@ -13,7 +13,7 @@ from mor.policy.belief import PoseBelief, SearchBelief
 from mor.policy.features import ObservationLayout, feature_names, observation_vector
 from mor.policy.params import ObservationParams
 from mor.policy.search_view import sector_count, sector_masses
-from mor.policy.signature import PolicySignature, check_signature, write_signature
+from mor.policy.signature import PolicySignature, check_signature, warm_start_names, write_signature
 from mor.policy.variants import VARIANTS
 from mor.sim.arena import Arena
 
@@ -84,3 +84,34 @@ def test_a_policy_trained_with_other_observation_settings_is_refused_by_name(tmp
     older = PolicySignature.of("pick", VARIANTS["lnet"], 2, "square", "x", DEFAULTS).model_dump(exclude={"features"})
     path.write_text(json.dumps(older))
     check_signature(path, PolicySignature.of("pick", VARIANTS["lnet"], 2, "square", "x", DEFAULTS))
+
+
+def test_a_setting_a_layout_does_not_read_refuses_none_of_its_policies(tmp_path) -> None:
+    """Other search sectors leave every policy without the stated belief loadable, and refuse lnet_search's."""
+    path, other = tmp_path / "meta.json", ObservationParams(search_sectors=4)
+    for variant, refused in (("lnet", False), ("lnet_search", True)):
+        write_signature(path, PolicySignature.of("pick", VARIANTS[variant], 2, "square", "x", DEFAULTS))
+        expected = PolicySignature.of("pick", VARIANTS[variant], 2, "square", "x", other)
+        if refused:
+            with pytest.raises(ConfigError, match=r"policy\.observation\.search_sectors=8 but this run needs 4"):
+                check_signature(path, expected)
+        else:
+            check_signature(path, expected)
+
+
+def test_a_warm_start_from_a_policy_with_other_shared_settings_is_refused(tmp_path) -> None:
+    """gt_pose's policy starts lnet_search's whatever the search sectors (gt_pose reads none), not across a cut."""
+    path = tmp_path / "meta.json"
+    write_signature(path, PolicySignature.of("pick", VARIANTS["gt_pose"], 2, "square", None, DEFAULTS))
+    sectors = PolicySignature.of("pick", VARIANTS["lnet_search"], 2, "square", "x", ObservationParams(search_sectors=4))
+    assert warm_start_names(path, sectors) == feature_names("pick", 2, ObservationLayout())
+    cut = PolicySignature.of("pick", VARIANTS["lnet"], 2, "square", "x", ObservationParams(clearance_max_m=2.0))
+    with pytest.raises(ConfigError, match=r"policy\.observation\.clearance_max_m=3\.0 but this run needs 2\.0"):
+        warm_start_names(path, cut)
+
+
+@pytest.mark.parametrize("settings", [{"clearance_rays_deg": [10.2, 10.4]}, {"search_sectors": 7},
+                                      {"search_ring_edges_m": [0.0]}])
+def test_settings_that_would_misname_a_feature_are_refused(settings) -> None:
+    with pytest.raises(ValueError, match="clearance rays|search sectors|search ring edges"):
+        ObservationParams(**settings)
