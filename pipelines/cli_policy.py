@@ -181,6 +181,41 @@ def eval_results(profile: ProfileOption = None) -> None:
     typer.echo(f"wrote {evaluate.collect_results(active_profile(profile))}")
 
 
+RowsArgument = Annotated[str, typer.Argument(help="FOLDER:METHOD: the method's rows in a folder of row files, e.g. "
+                                                 "cards/results/rows:gt_pose (every training run's).")]
+
+
+@eval_app.command("compare")
+def eval_compare(
+    a: RowsArgument,
+    b: RowsArgument,
+    out: Annotated[Path | None, typer.Option(help="JSON to write the differences to.")] = None,
+    profile: ProfileOption = None,
+    params: ParamsOption = DEFAULT_PARAMS,
+) -> None:
+    """Each metric's difference a - b between two rows, with the results card's statistics (a 95% interval over
+    training runs and episodes, and its verdict): e.g. rows evaluated in another workspace or with another params
+    file against the committed ones."""
+    from mor.eval.results import compare, method_row  # noqa: PLC0415
+    from pipelines.io import write_json  # noqa: PLC0415
+
+    resamples = load_profile(profile, params).evaluate.bootstrap_resamples
+    rows = []
+    for name, value in (("a", a), ("b", b)):
+        folder, _, method = value.rpartition(":")
+        if not folder or not method:
+            raise ConfigError(f"{name}: {value!r} is not FOLDER:METHOD (e.g. cards/results/rows:gt_pose)")
+        rows.append(method_row(Path(folder), method, resamples))
+    found = compare(*rows, resamples, names=(a, b))
+    for entry in found:
+        low, high = entry["difference"]["ci95"]
+        typer.echo(f"{entry['metric']}: {entry['difference']['mean']:+.3f} [{low:+.3f}, {high:+.3f}] "
+                   f"{entry['verdict']} (a: training seeds {entry['training_seeds'][a]}, b: "
+                   f"{entry['training_seeds'][b]})")
+    if out is not None:
+        typer.echo(f"wrote {write_json(out, {'a': a, 'b': b, 'comparisons': found})}")
+
+
 @bench_app.command("policy")
 def bench_policy_command(
     seconds: Annotated[float, typer.Option(min=1.0, help="Seconds per measurement (bounds the run's time).")] = 10.0,

@@ -141,23 +141,40 @@ def comparisons(rows: list[dict[str, Any]], resamples: int = 10_000) -> list[dic
     independently), the probability of improvement, and the verdict the interval gives: ``helps`` (a better: the
     interval above 0, below 0 for a metric where lower is better), ``hurts`` (the other way) or ``no evidence``."""
     main = {row["method"]: row for row in rows if row.get("workspace", ".") == "." and not is_zero_shot(row)}
+    return [entry for a, b in COMPARED if a in main and b in main and run_outcomes(main[a]) and run_outcomes(main[b])
+            for entry in compare(main[a], main[b], resamples)]
+
+
+def compare(row_a: dict[str, Any], row_b: dict[str, Any], resamples: int = 10_000,
+            names: tuple[str, str] | None = None) -> list[dict[str, Any]]:
+    """Each metric's difference between two rows with per-episode outcomes (``comparisons``' entries; ``names``:
+    what to call a and b, their methods by default)."""
+    a, b = names or (row_a["method"], row_b["method"])
     found = []
-    for a, b in COMPARED:
-        if a not in main or b not in main or not run_outcomes(main[a]) or not run_outcomes(main[b]):
-            continue
-        for metric in main[a]["metrics"]:
-            runs_a = [run[metric] for run in run_outcomes(main[a])]
-            runs_b = [run[metric] for run in run_outcomes(main[b])]
-            summary_a, dist_a = summarize_runs(runs_a, resamples, seed=1)
-            summary_b, dist_b = summarize_runs(runs_b, resamples, seed=2)
-            low, high = (float(x) for x in np.percentile(dist_a - dist_b, [2.5, 97.5]))
-            sign = -1.0 if metric in LOWER_IS_BETTER else 1.0
-            better, worse = (low > 0, high < 0) if sign > 0 else (high < 0, low > 0)
-            found.append({
-                "a": a, "b": b, "metric": metric, "training_seeds": {a: main[a].get("training_seeds"),
-                                                                     b: main[b].get("training_seeds")},
-                "difference": {"mean": summary_a["mean"] - summary_b["mean"], "ci95": [low, high]},
-                "probability_of_improvement": probability_of_improvement(
-                    *(([np.concatenate(list(run.values())) * sign for run in runs]) for runs in (runs_a, runs_b))),
-                "verdict": "helps" if better else "hurts" if worse else "no evidence"})
+    for metric in row_a["metrics"]:
+        runs_a = [run[metric] for run in run_outcomes(row_a)]
+        runs_b = [run[metric] for run in run_outcomes(row_b)]
+        summary_a, dist_a = summarize_runs(runs_a, resamples, seed=1)
+        summary_b, dist_b = summarize_runs(runs_b, resamples, seed=2)
+        low, high = (float(x) for x in np.percentile(dist_a - dist_b, [2.5, 97.5]))
+        sign = -1.0 if metric in LOWER_IS_BETTER else 1.0
+        better, worse = (low > 0, high < 0) if sign > 0 else (high < 0, low > 0)
+        found.append({
+            "a": a, "b": b, "metric": metric, "training_seeds": {a: row_a.get("training_seeds"),
+                                                                 b: row_b.get("training_seeds")},
+            "difference": {"mean": summary_a["mean"] - summary_b["mean"], "ci95": [low, high]},
+            "probability_of_improvement": probability_of_improvement(
+                *(([np.concatenate(list(run.values())) * sign for run in runs]) for runs in (runs_a, runs_b))),
+            "verdict": "helps" if better else "hurts" if worse else "no evidence"})
     return found
+
+
+def method_row(folder: Path, method: str, resamples: int = 10_000) -> dict[str, Any]:
+    """``method``'s protocol row from the row files in ``folder`` (``method.json`` and ``method.seed_S.json``,
+    aggregated over its training runs); ConfigError naming the folder when it holds none."""
+    files = [folder / f"{method}.json", *sorted(folder.glob(f"{method}.seed_*.json"))]
+    rows = [json.loads(path.read_text()) for path in files if path.is_file()]
+    if not rows:
+        raise ConfigError(f"{folder}: no row of {method!r} ({method}.json or {method}.seed_S.json); run mor eval run "
+                          f"--method {method} first")
+    return aggregate_runs(rows, resamples)[0]

@@ -64,3 +64,29 @@ def test_the_verdict_follows_the_interval_of_the_difference() -> None:
     assert {c["verdict"] for c in comparisons(same, 500) if c["metric"] != "energy_remaining"} == {"no evidence"}
     worse = aggregate_runs([_row("lnet", 0, 0.1), _row("lnet_no_uncertainty", 0, 0.9)], 500)
     assert {c["metric"]: c for c in comparisons(worse, 500)}["pick_success"]["verdict"] == "hurts"
+
+
+def test_mor_eval_compare_states_the_difference_of_two_folders_of_rows(tmp_path) -> None:
+    """The same statistics as the results' comparisons, for any two rows: here gt_pose from two folders."""
+    import json
+    import re
+
+    from typer.testing import CliRunner
+
+    from pipelines.cli import app
+
+    for folder, p in (("new", 0.95), ("old", 0.4)):
+        (tmp_path / folder).mkdir()
+        for seed in range(3):
+            name = "gt_pose.json" if seed == 0 else f"gt_pose.seed_{seed}.json"
+            (tmp_path / folder / name).write_text(json.dumps(_row("gt_pose", seed, p)))
+    out = tmp_path / "compare.json"
+    result = CliRunner().invoke(app, ["eval", "compare", f"{tmp_path / 'new'}:gt_pose", f"{tmp_path / 'old'}:gt_pose",
+                                      "--out", str(out), "--profile", "tiny"])
+    assert result.exit_code == 0, result.output
+    assert re.search(r"rearrange_success: \+0\.\d{3} \[\+0\.\d{3}, \+0\.\d{3}\] helps", result.output), result.output
+    found = {c["metric"]: c for c in json.loads(out.read_text())["comparisons"]}
+    assert found["pick_success"]["training_seeds"][f"{tmp_path / 'new'}:gt_pose"] == [0, 1, 2]
+    missing = CliRunner().invoke(app, ["eval", "compare", f"{tmp_path}:gt_pose", f"{tmp_path / 'old'}:gt_pose",
+                                       "--profile", "tiny"])
+    assert missing.exit_code == 2 and "no row of 'gt_pose'" in missing.stderr, missing.output
