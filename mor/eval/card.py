@@ -83,11 +83,16 @@ def failure_section(rows: list[dict[str, Any]]) -> list[str]:
         found = [row for row in counted if task in row["failures"]]
         if not found:
             continue
-        lines += ["", f"### {task.capitalize()}", "", "| ending | " + " | ".join(f"`{row['method']}`" for row in found)
+        lines += ["", f"### {task.capitalize()}", "", "| ending | " + " | ".join(column_name(row) for row in found)
                   + " |", "|---|" + "---|" * len(found)]
         lines += [f"| {ending} | " + " | ".join(str(row["failures"][task][ending]) for row in found) + " |"
                   for ending in endings]
     return lines
+
+
+def column_name(row: dict[str, Any]) -> str:
+    """A row's name in a table with a column per row: its method, and "held-out" for a held-out row."""
+    return f"`{row['method']}`" + (" (held-out)" if row.get("episodes") == "held_out" else "")
 
 
 def held_out_section(rows: list[dict[str, Any]]) -> list[str]:

@@ -136,11 +136,13 @@ COMPARED: tuple[tuple[str, str], ...] = (
 
 
 def comparisons(rows: list[dict[str, Any]], resamples: int = 10_000) -> list[dict[str, Any]]:
-    """For each pair of ``COMPARED`` with both rows in the main setting and per-episode outcomes, each metric's
-    difference a - b: its mean and a 95% interval (the two rows' ``summarize_runs`` distributions, drawn
-    independently), the probability of improvement, and the verdict the interval gives: ``helps`` (a better: the
-    interval above 0, below 0 for a metric where lower is better), ``hurts`` (the other way) or ``no evidence``."""
-    main = {row["method"]: row for row in rows if row.get("workspace", ".") == "." and not is_zero_shot(row)}
+    """For each pair of ``COMPARED`` with both protocol rows (not held-out) in the main setting and per-episode
+    outcomes, each metric's difference a - b: its mean and a 95% interval (the two rows' ``summarize_runs``
+    distributions, drawn independently), the probability of improvement, and the verdict the interval gives:
+    ``helps`` (a better: the interval above 0, below 0 for a metric where lower is better), ``hurts`` (the other
+    way) or ``no evidence``."""
+    main = {row["method"]: row for row in rows if row.get("workspace", ".") == "." and not is_zero_shot(row)
+            and row.get("episodes") != "held_out"}
     return [entry for a, b in COMPARED if a in main and b in main and run_outcomes(main[a]) and run_outcomes(main[b])
             for entry in compare(main[a], main[b], resamples)]
 

@@ -66,6 +66,14 @@ def test_the_verdict_follows_the_interval_of_the_difference() -> None:
     assert {c["metric"]: c for c in comparisons(worse, 500)}["pick_success"]["verdict"] == "hurts"
 
 
+def test_a_held_out_row_is_not_compared_in_place_of_the_protocol_row() -> None:
+    held_out = {**_row("lnet", 0, 0.1), "episodes": "held_out"}
+    rows = aggregate_runs([_row("lnet", s, 0.9) for s in range(3)] + [held_out]
+                          + [_row("lnet_no_uncertainty", s, 0.9) for s in range(3)], 500)
+    found = {c["metric"]: c for c in comparisons(rows, 500)}
+    assert found["pick_success"]["training_seeds"]["lnet"] == [0, 1, 2]
+    assert found["pick_success"]["verdict"] == "no evidence"
+
 def test_mor_eval_compare_states_the_difference_of_two_folders_of_rows(tmp_path) -> None:
     """The same statistics as the results' comparisons, for any two rows: here gt_pose from two folders."""
     import json
