@@ -55,6 +55,17 @@ def policy_train(
             typer.echo(f"{summary['label']}: {summary['steps']} steps")
 
 
+@policy_app.command("pretrain-encoder")
+def policy_pretrain_encoder(profile: ProfileOption = None, params: ParamsOption = DEFAULT_PARAMS) -> None:
+    """Learn the pixel baselines' frame encoder without labels (policy.baseline.encoder: autoencoder): an
+    autoencoder on frames of the exploration walk; its weights, figure and card in cards/baseline_encoder/."""
+    from pipelines import pretrain_encoder  # noqa: PLC0415
+
+    summary = pretrain_encoder.run(load_profile(profile, params))
+    typer.echo(f"{paths.ENCODER_CARD}: held-out reconstruction MSE {summary['validation_mse']:.5f} (mean frame "
+               f"{summary['mean_frame_validation_mse']:.5f})")
+
+
 @policy_app.command("plan")
 def policy_plan(
     variant: Annotated[list[str] | None, typer.Option("--variant", "-v", help="Variant(s) (repeat; default: the "
@@ -182,7 +193,7 @@ def eval_results(profile: ProfileOption = None) -> None:
 
 
 RowsArgument = Annotated[str, typer.Argument(help="FOLDER:METHOD: the method's rows in a folder of row files, e.g. "
-                                                 "cards/results/rows:gt_pose (every training run's).")]
+                                                 "cards/results/rows:lnet (every training run's).")]
 
 
 @eval_app.command("compare")
@@ -204,7 +215,7 @@ def eval_compare(
     for name, value in (("a", a), ("b", b)):
         folder, _, method = value.rpartition(":")
         if not folder or not method:
-            raise ConfigError(f"{name}: {value!r} is not FOLDER:METHOD (e.g. cards/results/rows:gt_pose)")
+            raise ConfigError(f"{name}: {value!r} is not FOLDER:METHOD (e.g. cards/results/rows:lnet)")
         rows.append(method_row(Path(folder), method, resamples))
     found = compare(*rows, resamples, names=(a, b))
     for entry in found:

@@ -25,6 +25,7 @@ FILE_SOURCES: dict[str, tuple[Path, Callable[[dict[str, Any]], float]]] = {
     "train-lnet": (paths.LNET / "train_summary.json", lambda d: d["seconds"]),
     "calibrate-lnet": (paths.LNET_CALIBRATION, lambda d: d["seconds"]),
     "eval-lnet": (paths.LNET_CARD / "metrics.json", lambda d: d["seconds"]),
+    "pretrain-encoder": (paths.ENCODER_CARD / "summary.json", lambda d: d["seconds"]),
 }
 
 

@@ -21,6 +21,7 @@ LNET_CARD = Path("cards/lnet")            # model card, committed weights, metri
 LNET_ABLATION_CARD = Path("cards/lnet_ablation")  # committed results of mor ablate-lnet, shown by the model card
 POLICIES = DATASETS / "policy"           # policy training runs: <variant>/<task>/ checkpoints, logs, TensorBoard
 POLICY_CARD = Path("cards/policy")        # committed policies: <variant>/<task>/policy.pth + meta.json, card, curves
+ENCODER_CARD = Path("cards/baseline_encoder")  # the pixel baselines' pretrained frame encoder, its card and figure
 EVAL = DATASETS / "eval"                  # per-episode records: <method>.jsonl
 RESULTS_CARD = Path("cards/results")      # rows/<method>.json, results.json, README.md (the tables)
 README = Path("README.md")                 # the repository's front page: its headline results block (mor eval results)

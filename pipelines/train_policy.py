@@ -15,8 +15,9 @@ from pathlib import Path
 from mor.atomic import atomic_folder
 from mor.config import Profile
 from mor.locking import writer_lock
-from mor.policy.baselines import baseline_extractor
+from mor.policy.baselines import baseline_extractor, load_pretrained_encoder
 from mor.policy.envs import make_training_env
+from mor.policy.frame_encoder import ENCODER_FILE
 from mor.policy.hierarchy import POLICY_FILE, Skill
 from mor.policy.names import TASKS, Task
 from mor.policy.plan import TaskPlan, training_plan
@@ -77,6 +78,8 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
     policy, sim = profile.policy, profile.sim
     runner = committed_lnet(workspace_record(Path("."), profile), variant, profile.lnet)
     version = runner.identity if runner is not None else None
+    pretrained = (load_pretrained_encoder(paths.ENCODER_CARD / ENCODER_FILE)
+                  if variant.is_baseline and policy.baseline.encoder == "autoencoder" else None)
     summaries = []
     for task_plan in plan(profile, variant, tasks, seed):
         task, params, source = task_plan.task, task_plan.params, task_plan.start
@@ -93,7 +96,8 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
         summary = train_policy(
             lambda: make_training_env(task, variant, sim, params, policy.observation, runner, skills),  # noqa: B023
             params, signature, run_dir, seed, f"{variant.name} {task}" + (f" seed {seed}" if seed else ""),
-            progress, init_from, policy_kwargs=baseline_extractor(policy.baseline) if variant.is_baseline else None)
+            progress, init_from, policy_kwargs=baseline_extractor(policy.baseline) if variant.is_baseline else None,
+            initialize=pretrained if variant.is_baseline else None)
         publish(run_dir, policy_folder(paths.POLICY_CARD, variant.name, task, seed))
         summaries.append({**summary, "encoder": policy.baseline.encoder} if variant.is_baseline else summary)
     return summaries

@@ -8,9 +8,12 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
+import torch
 import yaml
 from typer.testing import CliRunner
 
+from mor.policy.frame_encoder import read_frame_autoencoder
+from mor.policy.policy_file import load_policy_file
 from pipelines.cli import app
 
 
@@ -219,6 +222,28 @@ def test_baseline_stages_train_evaluate_and_fill_table_1(workspace: Path) -> Non
     assert compute["total_seconds"] == pytest.approx(sum(compute["stages"].values()), abs=0.2)
     assert "## Compute" in readme
 
+
+def test_a_pretrained_encoder_is_published_and_stays_frozen_in_a_baselines_training(workspace: Path) -> None:
+    """mor policy pretrain-encoder writes the encoder's card; a baseline with encoder autoencoder trains on top of
+    it without changing it."""
+    params = yaml.safe_load((workspace / "params.yaml").read_text())
+    params["profiles"]["tiny"]["policy"]["baseline"]["encoder"] = "autoencoder"
+    (workspace / "params.yaml").write_text(yaml.safe_dump(params))
+    missing = CliRunner().invoke(app, ["policy", "train", "--variant", "baseline_img", "--task", "pick",
+                                       "--profile", "tiny"])
+    assert missing.exit_code == 2 and "run mor policy pretrain-encoder first" in missing.output
+    assert "held-out reconstruction MSE" in _run("policy", "pretrain-encoder", "--profile", "tiny")
+    card = workspace / "cards/baseline_encoder"
+    assert {p.name for p in card.iterdir()} == {"encoder.pth", "log.csv", "reconstructions.png", "summary.json",
+                                                "README.md"}
+    _run("policy", "train", "--variant", "baseline_img", "--task", "pick", "--profile", "tiny")
+    pretrained = read_frame_autoencoder(card / "encoder.pth")["encoder"]
+    trained = load_policy_file(workspace / "cards/policy/baseline_img/pick/policy.pth").state_dict()
+    for name, tensor in pretrained.items():
+        torch.testing.assert_close(trained[f"features_extractor.encoder.0.{name}"], tensor, rtol=0, atol=0)
+    _run("eval", "results", "--profile", "tiny")
+    compute = json.loads((workspace / "cards/results/compute.json").read_text())
+    assert "pretrain-encoder" in compute["stages"]
 
 @pytest.mark.parametrize("backend", ["process", "ray"])
 def test_parallel_evaluation_jobs_give_the_records_of_one_process(workspace: Path, backend: str) -> None:

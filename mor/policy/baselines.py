@@ -18,12 +18,14 @@ Encoders (``BaselineEncoder``): ``nature_cnn``, stable-baselines3's NatureCNN (t
 CNN: a quarter of the L-Net encoder's multiply-adds, so four baselines fit 2 CPU cores; frames of at least 36
 pixels), or, through ``mor.lnet.model.build_encoder``, the L-Net's ``compact`` encoder (any frame size: the
 ``tiny`` profile's) and torchvision's ``resnet18`` / ``resnet50``, randomly initialized (no pretrained weights
-can be downloaded here), for the ``paper`` profile.
+can be downloaded here), for the ``paper`` profile; or ``autoencoder``: ``mor.policy.frame_encoder``'s encoder,
+pretrained without labels (``mor policy pretrain-encoder``) and frozen, as Embodied-CLIP freezes CLIP.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, Literal
 
 import gymnasium as gym
@@ -32,8 +34,9 @@ import torch
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, NatureCNN
 
+from mor.errors import ConfigError
 from mor.lnet.model import build_encoder
-
+from mor.policy.frame_encoder import frame_encoder, read_frame_autoencoder
 from mor.policy.names import Task
 from mor.policy.params import BaselineParams
 from mor.policy.variants import BaselineInput, Variant
@@ -41,7 +44,7 @@ from mor.sim.catalog import N_CLASSES
 from mor.sim.geometry import bearing
 from mor.sim.tasks import DropEnv, PickEnv
 
-BaselineEncoder = Literal["nature_cnn", "compact", "resnet18", "resnet50"]
+BaselineEncoder = Literal["nature_cnn", "compact", "resnet18", "resnet50", "autoencoder"]
 
 
 def baseline_space(task: Task, input_kind: BaselineInput, image_shape: tuple[int, int, int], arena_half: float
@@ -132,14 +135,25 @@ class BaselineObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArg
 
 class BaselineExtractor(BaseFeaturesExtractor):
     """The image through the encoder -> (N, image_features); every other key flattened (SB3 one-hot encodes
-    ``goal_class``, so the policy's first linear layer is the class embedding) and concatenated after it."""
+    ``goal_class``, so the policy's first linear layer is the class embedding) and concatenated after it.
+    ``autoencoder``: the frozen ``frame_encoder`` with ``latent_channels``, its code flattened to
+    image_features = latent_channels x H/8 x W/8 (the ``image_features`` argument is not used)."""
 
     def __init__(self, observation_space: spaces.Dict, encoder: BaselineEncoder = "compact",
-                 image_features: int = 256) -> None:
+                 image_features: int = 256, latent_channels: int = 16) -> None:
         others = sum(spaces.flatdim(space) for key, space in observation_space.spaces.items() if key != "image")
+        _, height, width = observation_space["image"].shape
+        if encoder == "autoencoder":
+            if height % 8 or width % 8:
+                raise ValueError(f"the autoencoder encoder needs frames whose sides are multiples of 8, not "
+                                 f"{height}x{width}")
+            image_features = latent_channels * (height // 8) * (width // 8)
         super().__init__(observation_space, image_features + others)
         if encoder == "nature_cnn":
             self.encoder = NatureCNN(observation_space["image"], image_features, normalized_image=False)
+        elif encoder == "autoencoder":
+            self.encoder = torch.nn.Sequential(frame_encoder(latent_channels), torch.nn.Flatten())
+            self.encoder.requires_grad_(False)  # frozen: PPO's optimizer gets no gradient for it
         else:
             self.encoder = build_encoder(encoder, image_features)
         self.keys = [key for key in observation_space.spaces if key != "image"]
@@ -153,4 +167,26 @@ class BaselineExtractor(BaseFeaturesExtractor):
 def baseline_extractor(settings: BaselineParams) -> dict[str, Any]:
     """SB3 ``policy_kwargs`` of a baseline skill: ``BaselineExtractor`` with the profile's encoder and width."""
     return {"features_extractor_class": BaselineExtractor,
-            "features_extractor_kwargs": {"encoder": settings.encoder, "image_features": settings.image_features}}
+            "features_extractor_kwargs": {"encoder": settings.encoder, "image_features": settings.image_features,
+                                          "latent_channels": settings.pretrain.latent_channels}}
+
+
+def load_pretrained_encoder(path: Path) -> Callable[[torch.nn.Module], None]:
+    """What puts the pretrained encoder at ``path`` (``mor.policy.frame_encoder.ENCODER_FILE``) into a new ``autoencoder`` baseline policy
+    (``mor.policy.train.train_policy``'s ``initialize``); ConfigError naming the file when it is missing or was
+    made with other code channels."""
+    if not path.is_file():
+        raise ConfigError(f"{path}: no pretrained encoder for policy.baseline.encoder autoencoder; run mor policy "
+                          f"pretrain-encoder first")
+    saved = read_frame_autoencoder(path)
+
+    def initialize(policy: torch.nn.Module) -> None:
+        target = policy.features_extractor.encoder[0]
+        try:
+            target.load_state_dict(saved["encoder"])
+        except RuntimeError:
+            raise ConfigError(f"{path}: made with latent_channels {saved['latent_channels']}, other than "
+                              f"policy.baseline.pretrain.latent_channels; run mor policy pretrain-encoder again"
+                              ) from None
+
+    return initialize

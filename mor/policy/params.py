@@ -38,13 +38,29 @@ class PPOParams(ParamsModel):
                                                                       "there is one (the paper profile's ResNets)")
 
 
+class EncoderPretrainParams(ParamsModel):
+    """The label-free pretraining of the baselines' ``autoencoder`` encoder (``mor.policy.frame_encoder``)."""
+
+    frames: int = Field(20000, ge=16, description="frames of the exploration walk to learn from")
+    episode_steps: int = Field(150, ge=1, description="steps per walk episode")
+    steps: int = Field(2000, ge=1, description="Adam steps")
+    batch_size: int = Field(64, ge=1, description="frames per step")
+    learning_rate: float = Field(1e-3, gt=0)
+    latent_channels: int = Field(16, ge=1, description="code channels per 8x8 pixel block")
+    validation_share: float = Field(0.05, gt=0, lt=1, description="the last frames, held out")
+    log_every: int = Field(100, ge=1, description="steps per log row")
+    seed: int = Field(0, ge=0, description="the walk's and the training's seed")
+
+
 class BaselineParams(ParamsModel):
     """The end-to-end CNN baselines (``mor.policy.baselines``): encoder and their Pick and Drop PPO runs."""
 
-    encoder: Literal["nature_cnn", "compact", "resnet18", "resnet50"] = Field(
+    encoder: Literal["nature_cnn", "compact", "resnet18", "resnet50", "autoencoder"] = Field(
         "nature_cnn", description="nature_cnn: SB3's NatureCNN (2 CPU cores; frames >= 36 px); compact: the L-Net's "
-                                  "encoder (any frame size); resnet18/50: the paper's")
-    image_features: int = Field(256, ge=8, description="the encoder's output width")
+                                  "encoder (any frame size); resnet18/50: the paper's; autoencoder: pretrained "
+                                  "without labels (mor policy pretrain-encoder) and frozen")
+    image_features: int = Field(256, ge=8, description="the encoder's output width (autoencoder: its code's size)")
+    pretrain: EncoderPretrainParams = Field(default_factory=EncoderPretrainParams)
     pick: PPOParams = Field(default_factory=PPOParams)
     drop: PPOParams = Field(default_factory=PPOParams)
 

@@ -203,12 +203,13 @@ def restore_checkpoint(model: MaskablePPO, monitor: TrainingMonitor, path: Path)
 def train_policy(
     make_env: Callable[[], VecEnv], params: PPOParams, signature: PolicySignature, out_dir: Path, seed: int,
     label: str, progress: bool = True, init_from: tuple[Path, list[str]] | None = None,
-    policy_kwargs: dict[str, Any] | None = None,
+    policy_kwargs: dict[str, Any] | None = None, initialize: Callable[[torch.nn.Module], None] | None = None,
 ) -> dict[str, Any]:
     """Train (or resume) one MaskablePPO policy for ``params.steps`` steps on ``make_env()``'s environments
     (``mor.policy.envs.make_training_env``). init_from: (a policy's policy.pth, its feature names) to start from
     (``warm_start``) instead of a random initialization. Dict observations (the baselines) get SB3's
-    ``MultiInputPolicy`` with ``policy_kwargs`` (e.g. the image encoder), flat vectors the ``MlpPolicy``."""
+    ``MultiInputPolicy`` with ``policy_kwargs`` (e.g. the image encoder), flat vectors the ``MlpPolicy``.
+    initialize: called with a new policy (not a resumed one) before training, e.g. to load a pretrained encoder."""
     torch.set_num_threads(1)  # 2.4-10x faster than torch's default on 2 cores (docs/design.md, "Decisions")
     out_dir.mkdir(parents=True, exist_ok=True)
     checkpoint = out_dir / CHECKPOINT_FILE
@@ -238,6 +239,8 @@ def train_policy(
         (out_dir / "log.csv").unlink(missing_ok=True)  # rows of a run killed before its first checkpoint
         if init_from is not None:
             warm_start(model, init_from[0], init_from[1], signature.observation)
+        if initialize is not None:
+            initialize(model.policy)
     write_signature(out_dir / "meta.json", signature)  # what this folder's checkpoints are, from the first one on
     model.set_logger(configure(str(out_dir / "tb"), ["tensorboard"]))
     rollout = params.n_steps * env.num_envs

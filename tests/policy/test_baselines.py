@@ -7,11 +7,14 @@ import pytest
 import torch
 from stable_baselines3.common.preprocessing import preprocess_obs
 
+from mor.data.exploration import ExplorationParams
+from mor.errors import ConfigError
 from mor.eval.methods import METHODS
 from mor.eval.protocol import decider, sim_of
-from mor.policy.baselines import BaselineExtractor, BaselineObservation, baseline_inputs
+from mor.policy.baselines import BaselineExtractor, BaselineObservation, baseline_inputs, load_pretrained_encoder
 from mor.policy.envs import make_task_env
-from mor.policy.params import ObservationParams
+from mor.policy.frame_encoder import frame_autoencoder, pretrain_autoencoder, sample_frames, save_frame_autoencoder
+from mor.policy.params import EncoderPretrainParams, ObservationParams
 from mor.policy.signature import PolicySignature
 from mor.policy.variants import VARIANTS
 from mor.sim.config import SimConfig
@@ -95,3 +98,47 @@ def test_the_object_order_rule_takes_the_object_after_the_last() -> None:
     decide = decider(METHODS["baseline_img"], None, None, FEATURES)
     targets = np.zeros((3, 3, 2))
     assert decide(None, np.array([3, 3, 3]), targets, np.array([-1, 0, 2])).tolist() == [0, 1, 0]
+
+
+class _Policy(torch.nn.Module):
+    """What the encoder loader reads of an SB3 policy: its features extractor."""
+
+    def __init__(self, extractor: BaselineExtractor) -> None:
+        super().__init__()
+        self.features_extractor = extractor
+
+
+PRETRAIN = EncoderPretrainParams(frames=48, episode_steps=16, steps=30, batch_size=8, log_every=10,
+                                 validation_share=0.25, seed=3)
+
+
+def test_the_walks_frames_are_seeded_and_the_autoencoder_learns_them() -> None:
+    frames = sample_frames(SIM, ExplorationParams(), PRETRAIN, progress=False)
+    assert frames.shape == (48, 3, 32, 32) and frames.dtype == np.uint8
+    np.testing.assert_array_equal(frames, sample_frames(SIM, ExplorationParams(), PRETRAIN, progress=False))
+    other = sample_frames(SIM, ExplorationParams(), PRETRAIN.model_copy(update={"seed": 4}), progress=False)
+    assert not np.array_equal(frames, other)
+    model, log = pretrain_autoencoder(frames, PRETRAIN, progress=False)
+    assert [row["step"] for row in log] == [10, 20, 30]
+    assert log[-1]["validation_mse"] < log[0]["validation_mse"]  # held-out frames: it learns, not only memorizes
+    again, _ = pretrain_autoencoder(frames, PRETRAIN, progress=False)
+    for mine, theirs in zip(model.state_dict().values(), again.state_dict().values(), strict=True):
+        torch.testing.assert_close(mine, theirs, rtol=0, atol=0)
+
+
+def test_the_autoencoder_extractor_is_frozen_and_loads_the_pretrained_weights(tmp_path) -> None:
+    env = BaselineObservation(make_task_env("pick", SIM, render_frames=True), "img")
+    extractor = BaselineExtractor(env.observation_space, "autoencoder", latent_channels=4)
+    assert extractor.features_dim == 4 * 4 * 4 + 24
+    assert not any(p.requires_grad for p in extractor.encoder.parameters())
+    with pytest.raises(ConfigError, match=r"encoder.pth: no pretrained encoder .* mor policy pretrain-encoder"):
+        load_pretrained_encoder(tmp_path / "encoder.pth")
+    model = frame_autoencoder(4)
+    save_frame_autoencoder(model, 4, tmp_path / "encoder.pth")
+    load_pretrained_encoder(tmp_path / "encoder.pth")(_Policy(extractor))
+    for mine, theirs in zip(extractor.encoder[0].state_dict().values(), model[0].state_dict().values(), strict=True):
+        torch.testing.assert_close(mine, theirs, rtol=0, atol=0)
+    save_frame_autoencoder(frame_autoencoder(8), 8, tmp_path / "wide.pth")
+    with pytest.raises(ConfigError, match=r"wide.pth: made with latent_channels 8"):
+        load_pretrained_encoder(tmp_path / "wide.pth")(_Policy(extractor))
+    env.close()
