@@ -143,3 +143,9 @@ def tiny_dataset(tiny_collection: Path, tmp_path_factory: pytest.TempPathFactory
 def episodes_copy(tiny_collection: Path, tmp_path: Path) -> Path:
     """A private copy of the tiny collection that a test may damage."""
     return Path(shutil.copytree(tiny_collection, tmp_path / "episodes"))
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The long ``pipeline`` tests first, so that under ``pytest -n 2`` one worker runs them while the other runs
+    the rest, instead of everything waiting for them at the end."""
+    items.sort(key=lambda item: item.get_closest_marker("pipeline") is None)
