@@ -264,6 +264,12 @@ def test_compute_sums_each_workspaces_stages_and_all_of_them(tmp_path: Path, mon
         rows = folder / "cards/results/rows"
         rows.mkdir(parents=True)
         (rows / "lnet.json").write_text(json.dumps({"wall_seconds": seconds}))
+    (Path("cards/results/rows") / "lnet.seed_1.json").write_text(json.dumps({"wall_seconds": 50.0}))
+    (Path("cards/results/rows") / "lnet_search.json").write_text(json.dumps({"wall_seconds": 40.0}))
+    Path("dvc.yaml").write_text(yaml.safe_dump({"stages": {"evaluate": {
+        "matrix": {"method": ["lnet"]}, "cmd": "mor eval run --method ${item.method}"}}}))
     compute = update_compute(Path("compute.json"), "tiny")
     assert compute["stages"]["polygon: eval run lnet"] == 30.0 and compute["total_seconds"] == 96.0
     assert compute["workspace_seconds"] == {"main": 60.0, "objects_2": 6.0, "polygon": 30.0}
+    assert compute["extra_runs"] == ["eval run lnet.seed_1", "eval run lnet_search"]  # not what dvc repro runs
+    assert compute["extra_seconds"] == 90.0

@@ -127,14 +127,19 @@ def compute_section(compute: dict[str, Any] | None) -> list[str]:
     verdict = "within" if total <= target else "over"
     lines = ["", "## Compute", "",
              f"Wall time of each stage's last run on the machine that ran it (from the files the stages write, kept "
-             f"in `compute.json`): **{total / 3600:.2f} h in all, {verdict} the {target / 3600:.0f} h target** for "
-             "this profile from an empty checkout. A resumed stage counts from its restart, and stages that shared "
-             "the machine with others ran slower than they would alone.", ""]
+             f"in `compute.json`): **{total / 3600:.2f} h for what `dvc repro` runs, {verdict} the "
+             f"{target / 3600:.0f} h target** for this profile from an empty checkout. A resumed stage counts from its "
+             "restart, and stages that shared the machine with others ran slower than they would alone.", ""]
+    if compute.get("extra_runs"):
+        lines += [f"Beside the pipeline, {compute['extra_seconds'] / 3600:.2f} h of runs the results also hold (other "
+                  "training seeds, held-out episodes, variants no stage runs; marked * below).", ""]
     if compute.get("workspace_seconds"):
         lines += ["By workspace (main, then each setting): " + ", ".join(
             f"{name} {seconds / 3600:.2f} h" for name, seconds in compute["workspace_seconds"].items()) + ".", ""]
     lines += ["| stage | minutes |", "|---|---|"]
-    lines += [f"| {stage} | {seconds / 60:.1f} |" for stage, seconds in compute["stages"].items()]
+    extra = set(compute.get("extra_runs", []))
+    lines += [f"| {stage}{' *' if stage in extra else ''} | {seconds / 60:.1f} |"
+              for stage, seconds in compute["stages"].items()]
     return lines
 
 

@@ -268,8 +268,9 @@ def budget_line(rows: list[dict[str, Any]], spec: TableSpec) -> str:
         if row is not None and row.get("train_steps"):
             steps = ", ".join(f"{k} {v:,}" for k, v in row["train_steps"].items())
             parts.append(f"{line.label if repeated.count(row['method']) > 1 else row['method']}: {steps}")
-    evaluated = {(tuple(r["seeds"]), r["episodes_per_seed"]) for r in rows}
-    protocol = "; ".join(f"{len(s)} seeds × {e} episodes per task" for s, e in sorted(evaluated))
+    evaluated = {(tuple(r["seeds"]), r["episodes_per_seed"]) for _, r in present if r is not None}
+    protocol = "; ".join(f"{len(s)} seeds ({', '.join(map(str, s))}) × {e} episodes per task"
+                         for s, e in sorted(evaluated)) or "–"
     return f"Evaluation: {protocol}. Training steps (decisions for the decision policy): " + ("; ".join(parts) or "–")
 
 

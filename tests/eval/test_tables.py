@@ -6,7 +6,7 @@ import pytest
 
 from mor.errors import ConfigError
 from mor.eval.paper import METRIC_NAMES
-from mor.eval.tables import TABLES, require_complete, table_markdown
+from mor.eval.tables import TABLES, budget_line, require_complete, table_markdown
 
 
 def _row(method: str, value: float) -> dict:
@@ -27,6 +27,14 @@ def test_a_table_has_every_cell_in_its_column_and_the_papers_numbers_labelled() 
     lnet = next(line for line in lines if line.startswith("| Ours"))
     assert "0.200 ± 0.010 [0.180, 0.220] ✗ | 0.707 ± 0.020" in lnet
     require_complete(TABLES[2], rows)
+
+
+def test_the_budget_line_names_each_protocol_of_the_tables_rows_once() -> None:
+    held_out = {**_row("gt_pose", 0.9), "seeds": [100, 101], "method": "gt_pose_held_out"}  # in no table
+    line = budget_line([_row("gt_pose", 0.9), _row("lnet", 0.2), held_out, {**_row("oracle", 1.0), "seeds": [7]}],
+                       TABLES[2])
+    assert line.startswith("Evaluation: 2 seeds (0, 1) × 2 episodes per task. Training steps")
+    assert "100" not in line and "(7)" not in line
 
 
 def test_a_table_with_rows_missing_names_them_and_the_commands() -> None:
