@@ -77,7 +77,7 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
     """``run``'s work, under the lock of the seed's run: each task of the plan trained, then published to its card."""
     policy, sim = profile.policy, profile.sim
     runner = committed_lnet(workspace_record(Path("."), profile), variant, profile.lnet)
-    version = runner.identity if runner is not None else None
+    version, stated = (runner.identity, runner.stated_identity) if runner is not None else (None, None)
     pretrained = (load_pretrained_encoder(paths.ENCODER_CARD / ENCODER_FILE)
                   if variant.is_baseline and policy.baseline.encoder == "autoencoder" else None)
     summaries = []
@@ -89,7 +89,7 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
                                       policy.skills_deterministic) for name in ("pick", "drop"))
         signature = (PolicySignature.of_baseline(task, variant, sim.n_objects, sim.arena, sim.image_size)
                      if variant.is_baseline else PolicySignature.of(task, variant, sim.n_objects, sim.arena, version,
-                                                                   policy.observation))
+                                                                   policy.observation, stated))
         init_from = None if source is None else (source / POLICY_FILE,
                                                  warm_start_names(source / "meta.json", signature))
         run_dir = policy_folder(paths.POLICIES, variant.name, task, seed)

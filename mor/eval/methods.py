@@ -147,14 +147,14 @@ def load_method(method: Method, workspace: Workspace, profile: Profile, zero_sho
     sim, deterministic, features = profile.sim, profile.policy.skills_deterministic, profile.policy.observation
     folders = policy_folders(method, policy_root(workspace, zero_shot), training_seed)
     runner = committed_lnet(workspace, method.variant, profile.lnet)
-    version = runner.identity if runner is not None else None
+    version, stated = (runner.identity, runner.stated_identity) if runner is not None else (None, None)
     allow = ZERO_SHOT_FIELDS if zero_shot else ()
     skills: dict[str, Skill | None] = {"decision": None}
     for task, folder in folders.items():
         owner = method.skill_owners()[task]
         expected = (PolicySignature.of_baseline(task, owner, sim.n_objects, sim.arena, sim.image_size)
                     if owner.is_baseline else PolicySignature.of(task, owner, sim.n_objects, sim.arena, version,
-                                                                 features))
+                                                                 features, stated))
         check_signature(folder / "meta.json", expected, allow)
         skills[task] = Skill.load(folder / POLICY_FILE, deterministic)
     policies = TrainedPolicies(skills["pick"], skills["drop"], skills["decision"])

@@ -86,6 +86,12 @@ class LNetRunner:
         return lnet_identity(self.dataset_version, self.checkpoint_digest, self.fitted, self.encoder_precision)
 
     @property
+    def stated_identity(self) -> str:
+        """What a policy that reads the stated belief records beside ``identity`` (``stated_version``):
+        ``stated_identity``."""
+        return stated_identity(self.fitted)
+
+    @property
     def encoder_precision(self) -> str:
         """The image encoder's arithmetic (``LNet.use_encoder_precision``): float32 or bfloat16."""
         return "bfloat16" if self.model.posenet.encoder_bfloat16 else "float32"
@@ -200,7 +206,8 @@ def lnet_identity(dataset_version: str, checkpoint_digest: str | None, fitted: F
     """The dataset version; for a loaded checkpoint, the first 12 hex digits of its file's SHA-256 (another training
     run is another L-Net); unless the scales and the tracking settings are the defaults, ``-cal`` and 8 hex digits
     of them (another tracking rule or other scales give other estimates: what a policy reads changes; the stated
-    belief's parameters, ``fitted.stated``, are left out: no policy reads them); and ``-bf16`` for a bfloat16
+    belief's parameters, ``fitted.stated``, are left out: only a policy that reads the stated belief records them, as
+``stated_identity``); and ``-bf16`` for a bfloat16
     encoder (its estimates differ a little from float32's)."""
     identity = dataset_version if checkpoint_digest is None else f"{dataset_version}-{checkpoint_digest}"
     if (fitted.scales, fitted.tracking) != (Calibration(), TrackingSettings()):
@@ -211,6 +218,13 @@ def lnet_identity(dataset_version: str, checkpoint_digest: str | None, fitted: F
             del hashed["gate"]
         identity += "-cal" + hashlib.sha256(json.dumps(hashed, sort_keys=True).encode()).hexdigest()[:8]
     return identity + ("-bf16" if encoder_precision == "bfloat16" else "")
+
+
+def stated_identity(fitted: FittedCalibration) -> str:
+    """8 hex digits of the stated belief's parameters (``fitted.stated``: the lost probabilities, the search
+    belief's find probability, its chosen settings), which ``lnet_identity`` leaves out: a policy that reads the
+    stated belief (``Variant.search``) records it, so that another calibration of the belief refuses that policy."""
+    return hashlib.sha256(json.dumps(asdict(fitted.stated), sort_keys=True).encode()).hexdigest()[:8]
 
 
 def file_digest(path: Path) -> str:

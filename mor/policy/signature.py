@@ -28,17 +28,20 @@ class PolicySignature(BaseModel):
     arena: str
     observation: list[str]
     lnet_version: str | None = None
+    stated_version: str | None = None
     features: ObservationParams = Field(default_factory=ObservationParams)
 
     @classmethod
     def of(cls, task: Task, variant: Variant, n_objects: int, arena: str, lnet_version: str | None,
-           features: ObservationParams) -> PolicySignature:
+           features: ObservationParams, stated_version: str | None = None) -> PolicySignature:
         """A pose variant's: its ``feature_names`` in its layout with ``features`` (the profile's
-        ``policy.observation``); ``lnet_version`` only where it observes through the L-Net."""
+        ``policy.observation``); ``lnet_version`` only where it observes through the L-Net, ``stated_version``
+        (``mor.lnet.runtime.stated_identity``) only where it reads the stated belief too (``Variant.search``)."""
         layout = ObservationLayout.of(variant, features)
         return cls(task=task, variant=variant.name, n_objects=n_objects, arena=arena,
                    observation=feature_names(task, n_objects, layout),
-                   lnet_version=lnet_version if variant.uses_lnet else None, features=layout.recorded_features())
+                   lnet_version=lnet_version if variant.uses_lnet else None,
+                   stated_version=stated_version if variant.search else None, features=layout.recorded_features())
 
     @classmethod
     def of_baseline(cls, task: Task, variant: Variant, n_objects: int, arena: str, image_size: int
@@ -84,14 +87,15 @@ def _check_features(path: Path, have: ObservationParams, want: ObservationParams
 
 
 #: what a zero-shot evaluation (a policy played in another arena, through that arena's L-Net) may differ in
-ZERO_SHOT_FIELDS = ("arena", "lnet_version")
+ZERO_SHOT_FIELDS = ("arena", "lnet_version", "stated_version")
 
 
 def check_signature(path: Path, expected: PolicySignature, allow: tuple[str, ...] = ()) -> None:
     """Raise ConfigError naming both sides when the policy at ``path`` (its meta.json) was trained otherwise
     (``allow``: fields that may differ, e.g. ``ZERO_SHOT_FIELDS``)."""
     found = read_signature(path)
-    for field in (f for f in ("task", "variant", "n_objects", "arena", "lnet_version") if f not in allow):
+    for field in (f for f in ("task", "variant", "n_objects", "arena", "lnet_version", "stated_version")
+                  if f not in allow):
         have, want = getattr(found, field), getattr(expected, field)
         if have != want:
             raise ConfigError(f"{path}: the policy was trained with {field}={have!r} but this run needs {want!r}; "

@@ -115,3 +115,23 @@ def test_a_warm_start_from_a_policy_with_other_shared_settings_is_refused(tmp_pa
 def test_settings_that_would_misname_a_feature_are_refused(settings) -> None:
     with pytest.raises(ValueError, match="clearance rays|search sectors|search ring edges"):
         ObservationParams(**settings)
+
+
+def test_a_policy_that_reads_the_stated_belief_is_refused_under_another_calibration_of_it(tmp_path) -> None:
+    """The L-Net identity leaves the stated belief's parameters out; lnet_search records them apart, lnet does not."""
+    from mor.lnet.calibration_file import FittedCalibration  # noqa: PLC0415
+    from mor.lnet.runtime import stated_identity  # noqa: PLC0415
+    from mor.lnet.stated import StatedParams  # noqa: PLC0415
+
+    fitted, refitted = FittedCalibration(), FittedCalibration(stated=StatedParams(search_find=0.3))
+    assert stated_identity(fitted) != stated_identity(refitted)
+    path = tmp_path / "meta.json"
+    for variant, refused in (("lnet", False), ("lnet_search", True)):
+        write_signature(path, PolicySignature.of("pick", VARIANTS[variant], 2, "square", "x", DEFAULTS,
+                                                 stated_identity(fitted)))
+        expected = PolicySignature.of("pick", VARIANTS[variant], 2, "square", "x", DEFAULTS, stated_identity(refitted))
+        if refused:
+            with pytest.raises(ConfigError, match=r"trained with stated_version="):
+                check_signature(path, expected)
+        else:
+            check_signature(path, expected)
