@@ -112,3 +112,20 @@ def test_predict_calibrate_and_score_whole_episodes(tiny_dataset: tuple, tmp_pat
     result = metrics(fit_calibration(predictions).scales.apply(predictions, predictions.confusable))
     assert 0.0 <= result["coverage"]["agent_position"]["2sigma"] <= 1.0
     assert result["agent_position_error_m"]["median"] >= 0.0
+
+
+def test_the_same_seed_and_params_train_the_same_weights(tiny_dataset: tuple, tmp_path: Path) -> None:
+    """The default profile's recipe at toy sizes: its model (filter tracker, attention head, visibility), a
+    bfloat16 encoder, pretraining, window steps and a data-loading worker process."""
+    manifest, root, _ = tiny_dataset
+    version = manifest_version(read_manifest(manifest))
+    config = CONFIG.model_copy(update={"tracker": "filter", "object_head": "attention", "visibility": True,
+                                       "detach_visibility": True})
+    params = PARAMS.model_copy(update={"pretrain_steps": 2, "pretrain_batch_size": 3, "max_steps": 3,
+                                       "num_workers": 1, "encoder_precision": "bfloat16"})
+    trained = [load_model(tmp_path / name / BEST, signature(config, version, 16), torch.device("cpu")).state_dict()
+               for name in ("first", "second")
+               if train(config, params, root / "train", root / "validation", tmp_path / name, version,
+                        progress=False)]
+    differ = [key for key in trained[0] if not torch.equal(trained[0][key], trained[1][key])]
+    assert not differ, f"two runs with one seed differ in {len(differ)} tensors, e.g. {differ[:3]}"
