@@ -94,16 +94,15 @@ def update_compute(path: Path, profile: str) -> dict[str, Any]:
     stages.update(stage_seconds(Path(".")))
     for folder in sorted(paths.SETTINGS.glob("*")):
         stages.update({f"{folder.name}: {stage}": s for stage, s in stage_seconds(folder).items()})
-    workspaces: dict[str, float] = {}
     words = pipeline_words()
     extra = sorted(stage for stage in stages if is_extra_run(stage, words))
-    for stage in stages:
+    pipelined = {stage: seconds for stage, seconds in stages.items() if stage not in extra}
+    workspaces: dict[str, float] = {}
+    for stage, seconds in pipelined.items():
         name = stage.split(": ", 1)[0] if ": " in stage else "main"  # a setting's stages are "NAME: stage"
-        if stage not in extra:
-            workspaces[name] = round(workspaces.get(name, 0.0) + stages[stage], 1)
+        workspaces[name] = round(workspaces.get(name, 0.0) + seconds, 1)
     result = {"profile": profile, "stages": dict(sorted(stages.items())),
-              "total_seconds": round(sum(s for stage, s in stages.items() if stage not in extra), 1),
-              "workspace_seconds": dict(sorted(workspaces.items())),
+              "total_seconds": round(sum(pipelined.values()), 1), "workspace_seconds": dict(sorted(workspaces.items())),
               "extra_runs": extra, "extra_seconds": round(sum(stages[stage] for stage in extra), 1),
               "target_seconds": TARGET_SECONDS}
     write_json(path, result)
