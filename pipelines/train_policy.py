@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from mor.atomic import atomic_folder
 from mor.config import Profile
@@ -19,7 +20,9 @@ from mor.policy.baselines import baseline_extractor, load_pretrained_encoder
 from mor.policy.envs import make_training_env
 from mor.policy.frame_encoder import ENCODER_FILE
 from mor.policy.hierarchy import POLICY_FILE, Skill
+from mor.policy.imitation import IMITATION_LOG, clone_oracle
 from mor.policy.names import TASKS, Task
+from mor.policy.params import PPOParams
 from mor.policy.plan import TaskPlan, training_plan
 from mor.policy.signature import PolicySignature, warm_start_names
 from mor.policy.train import train_policy
@@ -29,7 +32,11 @@ from mor.policy.workspace import committed_lnet
 from pipelines import paths
 from pipelines.workspaces import workspace_record
 
-PUBLISHED = (POLICY_FILE, "meta.json", "summary.json", "log.csv", "learning_curve.png")  # the last two if trained
+if TYPE_CHECKING:
+    import torch
+
+PUBLISHED = (POLICY_FILE, "meta.json", "summary.json", "log.csv", "learning_curve.png",  # the last two if trained
+             IMITATION_LOG)  # a baseline's, if it imitated the oracle first
 
 
 def publish(run_dir: Path, card_dir: Path) -> None:
@@ -97,7 +104,30 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
             lambda: make_training_env(task, variant, sim, params, policy.observation, runner, skills),  # noqa: B023
             params, signature, run_dir, seed, f"{variant.name} {task}" + (f" seed {seed}" if seed else ""),
             progress, init_from, policy_kwargs=baseline_extractor(policy.baseline) if variant.is_baseline else None,
-            initialize=pretrained if variant.is_baseline else None)
+            initialize=_baseline_start(profile, variant, task, params, seed, run_dir, pretrained, progress)
+            if variant.is_baseline else None)
         publish(run_dir, policy_folder(paths.POLICY_CARD, variant.name, task, seed))
-        summaries.append({**summary, "encoder": policy.baseline.encoder} if variant.is_baseline else summary)
+        summaries.append({**summary, "encoder": policy.baseline.encoder,
+                          "imitation": policy.baseline.imitation.model_dump()} if variant.is_baseline else summary)
     return summaries
+
+
+def _baseline_start(profile: Profile, variant: Variant, task: Task, params: PPOParams, seed: int, run_dir: Path,
+                    pretrained: Callable[[torch.nn.Module], None] | None, progress: bool
+                    ) -> Callable[[torch.nn.Module], None]:
+    """What a new baseline policy gets before PPO: the pretrained encoder (``pretrained``, if any), then, with
+    ``policy.baseline.imitation.rounds``, behaviour cloning from the oracle on in-process envs of its task."""
+    imitation = profile.policy.baseline.imitation
+
+    def initialize(model_policy: torch.nn.Module) -> None:
+        if pretrained is not None:
+            pretrained(model_policy)
+        if imitation.rounds:
+            env = make_training_env(task, variant, profile.sim, params.model_copy(update={"vec_env": "dummy"}),
+                                    profile.policy.observation)
+            try:
+                clone_oracle(model_policy, env, imitation, params.gamma, seed, run_dir / IMITATION_LOG, progress)
+            finally:
+                env.close()
+
+    return initialize

@@ -52,6 +52,20 @@ class EncoderPretrainParams(ParamsModel):
     seed: int = Field(0, ge=0, description="the walk's and the training's seed")
 
 
+class ImitationParams(ParamsModel):
+    """Behaviour cloning from the scripted oracle with DAgger rounds before a baseline skill's PPO
+    (``mor.policy.imitation``); ``rounds`` 0: none, the skill starts from its random initialization."""
+
+    rounds: int = Field(0, ge=0, description="round 0: the oracle drives; later rounds: the policy drives, the oracle "
+                                             "labels (DAgger); 0: no imitation")
+    round_steps: int = Field(10_000, ge=1, description="env steps per round")
+    epochs: int = Field(4, ge=1, description="passes over every label so far after each round")
+    batch_size: int = Field(256, ge=1)
+    learning_rate: float = Field(3e-4, gt=0, description="Adam's")
+    value_coef: float = Field(0.5, ge=0, description="weight of the value head's squared error against the driven "
+                                                     "episode's discounted return")
+
+
 class BaselineParams(ParamsModel):
     """The end-to-end CNN baselines (``mor.policy.baselines``): encoder and their Pick and Drop PPO runs."""
 
@@ -61,6 +75,7 @@ class BaselineParams(ParamsModel):
                                   "without labels (mor policy pretrain-encoder) and frozen")
     image_features: int = Field(256, ge=8, description="the encoder's output width (autoencoder: its code's size)")
     pretrain: EncoderPretrainParams = Field(default_factory=EncoderPretrainParams)
+    imitation: ImitationParams = Field(default_factory=ImitationParams)
     pick: PPOParams = Field(default_factory=PPOParams)
     drop: PPOParams = Field(default_factory=PPOParams)
 

@@ -1,0 +1,184 @@
+"""Behaviour cloning from the scripted oracle with DAgger rounds: where a pixel baseline's skill starts before PPO.
+
+PPO from pixels never meets a rewarded PICK often enough to learn it (docs/results.md, "Why Pick from pixels does
+not learn"): a PICK with nothing in reach ends the episode unpaid, so PPO drives PICK out first. Here the skill
+first imitates ``mor.sim.oracle.Oracle``, which reads the true state, and PPO then trains it as before.
+
+- Round 0: the oracle drives ``round_steps`` steps of the training envs; every observation the baseline sees is
+  labelled with the oracle's action.
+- Each later round: the policy being cloned drives (sampling its masked distribution) and the oracle labels what
+  it meets (DAgger, Ross, Gordon and Bagnell, AISTATS 2011), so the labels cover the policy's own mistakes.
+- After each round the policy trains on every label so far: the oracle action's negative log-likelihood under the
+  masked distribution, plus ``value_coef`` times the squared error of the value head against the discounted return
+  of the episode that was driven (so PPO starts with a critic in step with its actor).
+
+The oracle's labels use what the baseline cannot see (where an object out of view lies); the policy learns what
+the pixels allow. The rounds' figures (who drove, its success, the agreement with the oracle before training on
+the round, the wall seconds so far) go to ``imitation.csv``. Same seed, same envs and parameters: the same labels and weights.
+"""
+
+from __future__ import annotations
+
+import csv
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from sb3_contrib.common.maskable.policies import MaskableActorCriticPolicy
+from sb3_contrib.common.maskable.utils import get_action_masks
+from stable_baselines3.common.vec_env import DummyVecEnv
+from tqdm import tqdm
+
+from mor.atomic import atomic_output
+from mor.policy.params import ImitationParams
+from mor.sim.oracle import Oracle
+from mor.sim.tasks import DropEnv, PickEnv
+
+IMITATION_LOG = "imitation.csv"
+LOG_FIELDS = ("round", "driver", "steps", "episodes", "success", "agreement", "labels", "action_nll", "value_mse",
+              "seconds")
+
+
+@dataclass
+class Labelled:
+    """Steps of a round: observations (dict of (T, ...) arrays), the oracle's actions (T,), the action masks (T, A)
+    and the discounted return from each step (T,) of the episode that was driven."""
+
+    observations: dict[str, np.ndarray]
+    actions: np.ndarray
+    masks: np.ndarray
+    returns: np.ndarray
+
+    @staticmethod
+    def join(parts: list[Labelled]) -> Labelled:
+        return Labelled({key: np.concatenate([p.observations[key] for p in parts]) for key in parts[0].observations},
+                        np.concatenate([p.actions for p in parts]), np.concatenate([p.masks for p in parts]),
+                        np.concatenate([p.returns for p in parts]))
+
+    def __len__(self) -> int:
+        return len(self.actions)
+
+
+def oracle_actions(env: DummyVecEnv, oracles: list[Oracle]) -> np.ndarray:
+    """The oracle's next action in each env of ``env`` (N,), from its true state: Pick's goal object, Drop's target."""
+    actions = []
+    for oracle, wrapped in zip(oracles, env.envs, strict=True):
+        base = wrapped.unwrapped
+        if isinstance(base, PickEnv):
+            actions.append(oracle.pick(base.state, base.goal_object))
+        elif isinstance(base, DropEnv):
+            actions.append(oracle.drop(base.state, base.goal_position))
+        else:
+            raise TypeError(f"imitation clones Pick or Drop skills, not {type(base).__name__}")
+    return np.asarray(actions, np.int64)
+
+
+def discounted_returns(rewards: np.ndarray, dones: np.ndarray, gamma: float) -> np.ndarray:
+    """rewards, dones (T, N) -> (T, N): the discounted sum of the rewards from each step to its episode's end (an
+    episode still running at step T is cut there)."""
+    returns, following = np.zeros_like(rewards, np.float64), np.zeros(rewards.shape[1])
+    for t in range(len(rewards) - 1, -1, -1):
+        following = rewards[t] + gamma * following * (1.0 - dones[t])
+        returns[t] = following
+    return returns
+
+
+def drive(env: DummyVecEnv, oracles: list[Oracle], policy: MaskableActorCriticPolicy | None, steps: int,
+          gamma: float, seed: int, bar: tqdm) -> tuple[Labelled, dict[str, float]]:
+    """About ``steps`` steps of ``env`` (whole vector steps) from a fresh reset seeded by ``seed``, driven by the
+    oracle (``policy`` None) or by ``policy``; every step labelled with the oracle's action. Returns the labels and
+    the round's figures: episodes ended, their success rate, and the policy's agreement with the oracle (its most
+    likely action; NaN when the oracle drove)."""
+    env.seed(seed)
+    observation = env.reset()
+    for oracle in oracles:
+        oracle.reset()
+    frames: dict[str, list[np.ndarray]] = {key: [] for key in observation}
+    actions, masks, rewards, dones, agreed = [], [], [], [], []
+    successes: list[float] = []
+    for _ in range(-(-steps // env.num_envs)):
+        mask = get_action_masks(env)
+        label = oracle_actions(env, oracles)
+        for key, value in observation.items():
+            frames[key].append(value)
+        if policy is None:
+            action = label
+        else:
+            with torch.no_grad():
+                distribution = policy.get_distribution(policy.obs_to_tensor(observation)[0], action_masks=mask)
+                action = distribution.sample().numpy()
+                agreed.append(distribution.mode().numpy() == label)
+        observation, reward, done, infos = env.step(action)
+        for index in np.flatnonzero(done):
+            oracles[index].reset()
+            successes.append(float(infos[index]["metrics"]["success"]))
+        actions.append(label), masks.append(mask), rewards.append(reward), dones.append(done)
+        bar.update(env.num_envs)
+    returns = discounted_returns(np.asarray(rewards), np.asarray(dones, np.float64), gamma)
+    labelled = Labelled({key: np.concatenate(value) for key, value in frames.items()}, np.concatenate(actions),
+                        np.concatenate(masks), returns.reshape(-1).astype(np.float32))
+    figures = {"episodes": len(successes), "success": float(np.mean(successes)) if successes else float("nan"),
+               "agreement": float(np.mean(agreed)) if agreed else float("nan")}
+    return labelled, figures
+
+
+def fit(policy: MaskableActorCriticPolicy, data: Labelled, settings: ImitationParams, generator: torch.Generator
+        ) -> dict[str, float]:
+    """``settings.epochs`` passes over ``data`` in minibatches of ``settings.batch_size`` (Adam,
+    ``settings.learning_rate``) on the policy's trainable parameters; the last epoch's mean losses."""
+    optimizer = torch.optim.Adam([p for p in policy.parameters() if p.requires_grad], lr=settings.learning_rate)
+    policy.set_training_mode(True)
+    losses: dict[str, list[float]] = {"action_nll": [], "value_mse": []}
+    for _ in range(settings.epochs):
+        losses = {key: [] for key in losses}
+        for batch in torch.randperm(len(data), generator=generator).split(settings.batch_size):
+            index = batch.numpy()
+            observation, _ = policy.obs_to_tensor({key: value[index] for key, value in data.observations.items()})
+            values, log_prob, _ = policy.evaluate_actions(observation, torch.as_tensor(data.actions[index]),
+                                                          action_masks=data.masks[index])
+            action_nll = -log_prob.mean()
+            value_mse = torch.nn.functional.mse_loss(values.flatten(), torch.as_tensor(data.returns[index]))
+            optimizer.zero_grad()
+            (action_nll + settings.value_coef * value_mse).backward()
+            optimizer.step()
+            losses["action_nll"].append(action_nll.item())
+            losses["value_mse"].append(value_mse.item())
+    policy.set_training_mode(False)
+    return {key: round(float(np.mean(value)), 5) for key, value in losses.items()}
+
+
+def clone_oracle(policy: MaskableActorCriticPolicy, env: DummyVecEnv, settings: ImitationParams, gamma: float,
+                 seed: int, log_path: Path, progress: bool = True) -> list[dict[str, Any]]:
+    """Train ``policy`` to imitate the oracle on ``env`` (in-process Pick or Drop envs seen as the policy sees
+    them) for ``settings.rounds`` rounds (module docstring); the rounds' rows, also written to ``log_path``."""
+    oracles = [Oracle(wrapped.unwrapped.arena, wrapped.unwrapped.noise) for wrapped in env.envs]
+    generator = torch.Generator().manual_seed(seed)
+    round_seeds = np.random.SeedSequence([seed, 7919]).generate_state(settings.rounds)
+    parts: list[Labelled] = []
+    rows: list[dict[str, Any]] = []
+    started = time.monotonic()
+    with tqdm(total=settings.rounds * settings.round_steps, desc="imitation", unit="step", disable=not progress,
+              dynamic_ncols=True) as bar:
+        for round_index, round_seed in enumerate(round_seeds):
+            driver = None if round_index == 0 else policy
+            labelled, figures = drive(env, oracles, driver, settings.round_steps, gamma, int(round_seed), bar)
+            parts.append(labelled)
+            losses = fit(policy, Labelled.join(parts), settings, generator)
+            rows.append({"round": round_index, "driver": "oracle" if driver is None else "policy",
+                         "steps": len(labelled), **{k: round(v, 4) for k, v in figures.items()},
+                         "labels": sum(len(p) for p in parts), **losses,
+                         "seconds": round(time.monotonic() - started, 1)})
+            bar.set_postfix(success=f"{figures['success']:.2f}", nll=f"{losses['action_nll']:.3f}")
+            write_log(log_path, rows)
+    return rows
+
+
+def write_log(path: Path, rows: list[dict[str, Any]]) -> None:
+    """The rounds' rows (``LOG_FIELDS``) as CSV, through a temporary name."""
+    with atomic_output(path) as partial, partial.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=LOG_FIELDS)
+        writer.writeheader()
+        writer.writerows(rows)

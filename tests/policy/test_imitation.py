@@ -1,0 +1,96 @@
+"""Behaviour cloning from the oracle with DAgger rounds (``mor.policy.imitation``) on tiny rendered baseline envs."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from sb3_contrib import MaskablePPO
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from mor.policy.baselines import BaselineObservation, baseline_extractor
+from mor.policy.envs import make_task_env
+from mor.policy.imitation import Labelled, clone_oracle, discounted_returns, drive, fit, oracle_actions
+from mor.policy.params import BaselineParams, ImitationParams
+from mor.sim.config import SimConfig
+from mor.sim.oracle import Oracle
+
+SIM = SimConfig(n_objects=3, image_size=32)
+
+
+def baseline_envs(task: str, n: int = 2) -> DummyVecEnv:
+    return DummyVecEnv([lambda: BaselineObservation(make_task_env(task, SIM, render_frames=True), "img")] * n)
+
+
+def new_policy(env: DummyVecEnv, seed: int = 0) -> torch.nn.Module:
+    torch.set_num_threads(1)
+    kwargs = baseline_extractor(BaselineParams(encoder="compact", image_features=16))
+    return MaskablePPO("MultiInputPolicy", env, seed=seed, n_steps=8, batch_size=8,
+                       policy_kwargs={"net_arch": [16, 16], **kwargs}).policy
+
+
+def oracles_of(env: DummyVecEnv) -> list[Oracle]:
+    return [Oracle(e.unwrapped.arena, e.unwrapped.noise) for e in env.envs]
+
+
+def test_discounted_returns_stop_at_each_episodes_end() -> None:
+    rewards = np.array([[1.0], [2.0], [3.0], [4.0]])
+    dones = np.array([[0.0], [1.0], [0.0], [0.0]])
+    returns = discounted_returns(rewards, dones, gamma=0.5)
+    assert returns[:, 0].tolist() == [1 + 0.5 * 2, 2, 3 + 0.5 * 4, 4]
+
+
+@pytest.mark.parametrize("task", ["pick", "drop"])
+def test_the_labels_are_the_oracles_actions_and_the_oracle_drives_round_zero(task: str) -> None:
+    env = baseline_envs(task)
+    oracles = oracles_of(env)
+    env.seed(4)
+    env.reset()
+    expected = oracle_actions(env, oracles_of(env))
+    data, figures = drive(env, oracles, None, steps=12, gamma=0.99, seed=4, bar=_no_bar())
+    assert len(data) == 12 and data.actions[:2].tolist() == expected.tolist()
+    assert data.observations["image"].shape == (12, 3, 32, 32)
+    assert data.masks[np.arange(12), data.actions].all()  # the oracle only takes allowed actions
+    assert np.isnan(figures["agreement"])
+    env.close()
+
+
+def test_fitting_the_oracles_labels_makes_the_policy_agree_with_them() -> None:
+    env = baseline_envs("pick")
+    policy = new_policy(env)
+    data, _ = drive(env, oracles_of(env), None, steps=64, gamma=0.99, seed=0, bar=_no_bar())
+    settings = ImitationParams(rounds=1, epochs=1, batch_size=32, learning_rate=3e-3)
+    before = fit(policy, data, settings.model_copy(update={"learning_rate": 1e-12}), torch.Generator().manual_seed(0))
+    after = fit(policy, data, settings.model_copy(update={"epochs": 30}), torch.Generator().manual_seed(0))
+    assert after["action_nll"] < 0.7 * before["action_nll"]
+    assert after["value_mse"] < before["value_mse"]
+    env.close()
+
+
+def test_clone_oracle_logs_its_rounds_and_repeats_itself_with_the_same_seed(tmp_path: Path) -> None:
+    settings = ImitationParams(rounds=2, round_steps=16, epochs=1, batch_size=8)
+    weights = []
+    for run in ("a", "b"):
+        env = baseline_envs("pick")
+        policy = new_policy(env)
+        rows = clone_oracle(policy, env, settings, 0.99, seed=3, log_path=tmp_path / run / "imitation.csv",
+                            progress=False)
+        env.close()
+        weights.append(torch.cat([p.detach().flatten() for p in policy.parameters()]))
+        with (tmp_path / run / "imitation.csv").open() as handle:
+            logged = list(csv.DictReader(handle))
+        assert [row["driver"] for row in logged] == ["oracle", "policy"] == [row["driver"] for row in rows]
+        assert [int(row["labels"]) for row in logged] == [16, 32]
+        assert 0.0 <= float(logged[1]["agreement"]) <= 1.0
+    assert torch.equal(weights[0], weights[1])
+
+
+def _no_bar() -> object:
+    class Bar:
+        def update(self, n: int) -> None:
+            pass
+
+    return Bar()
