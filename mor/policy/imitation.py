@@ -8,9 +8,12 @@ first imitates ``mor.sim.oracle.Oracle``, which reads the true state, and PPO th
   labelled with the oracle's action.
 - Each later round: the policy being cloned drives (sampling its masked distribution) and the oracle labels what
   it meets (DAgger, Ross, Gordon and Bagnell, AISTATS 2011), so the labels cover the policy's own mistakes.
-- After each round the policy trains on every label so far: the oracle action's negative log-likelihood under the
-  masked distribution, plus ``value_coef`` times the squared error of the value head against the discounted return
-  of the episode that was driven (so PPO starts with a critic in step with its actor).
+- After each round the actor trains on every label so far: the oracle action's negative log-likelihood under the
+  masked distribution.
+- Then the critic: the cloned policy drives one more round, and the value head (the critic's layers only, the
+  shared encoder frozen) trains on the discounted returns of its own episodes. PPO's first advantages then measure
+  the policy it starts from; a critic left at random, or fitted to the oracle's far better returns, makes every
+  PICK look worse than expected and PPO drives PICK out again (a run that skipped this step ended at success 0).
 
 The oracle's labels use what the baseline cannot see (where an object out of view lies); the policy learns what
 the pixels allow. The rounds' figures (who drove, its success, the agreement with the oracle before training on
@@ -38,7 +41,7 @@ from mor.sim.oracle import Oracle
 from mor.sim.tasks import DropEnv, PickEnv
 
 IMITATION_LOG = "imitation.csv"
-LOG_FIELDS = ("round", "driver", "steps", "episodes", "success", "agreement", "labels", "action_nll", "value_mse",
+LOG_FIELDS = ("round", "driver", "trains", "steps", "episodes", "success", "agreement", "labels", "action_nll", "value_mse",
               "seconds")
 
 
@@ -125,11 +128,21 @@ def drive(env: DummyVecEnv, oracles: list[Oracle], policy: MaskableActorCriticPo
     return labelled, figures
 
 
-def fit(policy: MaskableActorCriticPolicy, data: Labelled, settings: ImitationParams, generator: torch.Generator
-        ) -> dict[str, float]:
+def critic_parameters(policy: MaskableActorCriticPolicy) -> list[torch.nn.Parameter]:
+    """The layers only the value estimate uses: the critic's MLP and value head (and its own encoder if the policy
+    does not share one)."""
+    own = [] if policy.share_features_extractor else list(policy.vf_features_extractor.parameters())
+    return [*own, *policy.mlp_extractor.value_net.parameters(), *policy.value_net.parameters()]
+
+
+def fit(policy: MaskableActorCriticPolicy, data: Labelled, settings: ImitationParams, generator: torch.Generator,
+        critic: bool = False) -> dict[str, float]:
     """``settings.epochs`` passes over ``data`` in minibatches of ``settings.batch_size`` (Adam,
-    ``settings.learning_rate``) on the policy's trainable parameters; the last epoch's mean losses."""
-    optimizer = torch.optim.Adam([p for p in policy.parameters() if p.requires_grad], lr=settings.learning_rate)
+    ``settings.learning_rate``): the actor (every trainable parameter) on the oracle action's negative
+    log-likelihood, or with ``critic`` the ``critic_parameters`` on the value's squared error against the returns.
+    Both losses' means over the last epoch."""
+    trained = critic_parameters(policy) if critic else [p for p in policy.parameters() if p.requires_grad]
+    optimizer = torch.optim.Adam(trained, lr=settings.learning_rate)
     policy.set_training_mode(True)
     losses: dict[str, list[float]] = {"action_nll": [], "value_mse": []}
     for _ in range(settings.epochs):
@@ -142,7 +155,7 @@ def fit(policy: MaskableActorCriticPolicy, data: Labelled, settings: ImitationPa
             action_nll = -log_prob.mean()
             value_mse = torch.nn.functional.mse_loss(values.flatten(), torch.as_tensor(data.returns[index]))
             optimizer.zero_grad()
-            (action_nll + settings.value_coef * value_mse).backward()
+            (value_mse if critic else action_nll).backward()
             optimizer.step()
             losses["action_nll"].append(action_nll.item())
             losses["value_mse"].append(value_mse.item())
@@ -153,23 +166,27 @@ def fit(policy: MaskableActorCriticPolicy, data: Labelled, settings: ImitationPa
 def clone_oracle(policy: MaskableActorCriticPolicy, env: DummyVecEnv, settings: ImitationParams, gamma: float,
                  seed: int, log_path: Path, progress: bool = True) -> list[dict[str, Any]]:
     """Train ``policy`` to imitate the oracle on ``env`` (in-process Pick or Drop envs seen as the policy sees
-    them) for ``settings.rounds`` rounds (module docstring); the rounds' rows, also written to ``log_path``."""
+    them): ``settings.rounds`` rounds for the actor, one for the critic (module docstring); the rounds' rows, also
+    written to ``log_path``."""
     oracles = [Oracle(wrapped.unwrapped.arena, wrapped.unwrapped.noise) for wrapped in env.envs]
     generator = torch.Generator().manual_seed(seed)
-    round_seeds = np.random.SeedSequence([seed, 7919]).generate_state(settings.rounds)
+    round_seeds = np.random.SeedSequence([seed, 7919]).generate_state(settings.rounds + 1)
     parts: list[Labelled] = []
     rows: list[dict[str, Any]] = []
     started = time.monotonic()
-    with tqdm(total=settings.rounds * settings.round_steps, desc="imitation", unit="step", disable=not progress,
-              dynamic_ncols=True) as bar:
+    with tqdm(total=(settings.rounds + 1) * settings.round_steps, desc="imitation", unit="step",
+              disable=not progress, dynamic_ncols=True) as bar:
         for round_index, round_seed in enumerate(round_seeds):
+            critic = round_index == settings.rounds
             driver = None if round_index == 0 else policy
             labelled, figures = drive(env, oracles, driver, settings.round_steps, gamma, int(round_seed), bar)
             parts.append(labelled)
-            losses = fit(policy, Labelled.join(parts), settings, generator)
+            losses = fit(policy, labelled if critic else Labelled.join(parts), settings,
+                         generator, critic)
             rows.append({"round": round_index, "driver": "oracle" if driver is None else "policy",
-                         "steps": len(labelled), **{k: round(v, 4) for k, v in figures.items()},
-                         "labels": sum(len(p) for p in parts), **losses,
+                         "trains": "critic" if critic else "actor", "steps": len(labelled),
+                         **{k: round(v, 4) for k, v in figures.items()},
+                         "labels": len(labelled) if critic else sum(len(p) for p in parts), **losses,
                          "seconds": round(time.monotonic() - started, 1)})
             bar.set_postfix(success=f"{figures['success']:.2f}", nll=f"{losses['action_nll']:.3f}")
             write_log(log_path, rows)

@@ -56,14 +56,13 @@ class ImitationParams(ParamsModel):
     """Behaviour cloning from the scripted oracle with DAgger rounds before a baseline skill's PPO
     (``mor.policy.imitation``); ``rounds`` 0: none, the skill starts from its random initialization."""
 
-    rounds: int = Field(0, ge=0, description="round 0: the oracle drives; later rounds: the policy drives, the oracle "
-                                             "labels (DAgger); 0: no imitation")
+    rounds: int = Field(0, ge=0, description="the actor's rounds: in round 0 the oracle drives, in later ones the "
+                                             "policy drives and the oracle labels (DAgger); then one round for the "
+                                             "critic; 0: no imitation")
     round_steps: int = Field(10_000, ge=1, description="env steps per round")
     epochs: int = Field(4, ge=1, description="passes over every label so far after each round")
     batch_size: int = Field(256, ge=1)
     learning_rate: float = Field(3e-4, gt=0, description="Adam's")
-    value_coef: float = Field(0.5, ge=0, description="weight of the value head's squared error against the driven "
-                                                     "episode's discounted return")
 
 
 class BaselineParams(ParamsModel):

@@ -58,15 +58,20 @@ def test_the_labels_are_the_oracles_actions_and_the_oracle_drives_round_zero(tas
     env.close()
 
 
-def test_fitting_the_oracles_labels_makes_the_policy_agree_with_them() -> None:
+def test_the_actor_learns_the_oracles_labels_and_the_critic_its_returns_without_moving_the_actor() -> None:
     env = baseline_envs("pick")
     policy = new_policy(env)
     data, _ = drive(env, oracles_of(env), None, steps=64, gamma=0.99, seed=0, bar=_no_bar())
     settings = ImitationParams(rounds=1, epochs=1, batch_size=32, learning_rate=3e-3)
-    before = fit(policy, data, settings.model_copy(update={"learning_rate": 1e-12}), torch.Generator().manual_seed(0))
-    after = fit(policy, data, settings.model_copy(update={"epochs": 30}), torch.Generator().manual_seed(0))
-    assert after["action_nll"] < 0.7 * before["action_nll"]
-    assert after["value_mse"] < before["value_mse"]
+    still = settings.model_copy(update={"learning_rate": 1e-12})
+    before = fit(policy, data, still, torch.Generator().manual_seed(0))
+    fit(policy, data, settings.model_copy(update={"epochs": 30}), torch.Generator().manual_seed(0))
+    actor = fit(policy, data, still, torch.Generator().manual_seed(0))
+    assert actor["action_nll"] < 0.7 * before["action_nll"]
+    fit(policy, data, settings.model_copy(update={"epochs": 30}), torch.Generator().manual_seed(0), critic=True)
+    critic = fit(policy, data, still, torch.Generator().manual_seed(0))
+    assert critic["value_mse"] < 0.5 * actor["value_mse"]
+    assert critic["action_nll"] == pytest.approx(actor["action_nll"], abs=1e-5)
     env.close()
 
 
@@ -82,8 +87,9 @@ def test_clone_oracle_logs_its_rounds_and_repeats_itself_with_the_same_seed(tmp_
         weights.append(torch.cat([p.detach().flatten() for p in policy.parameters()]))
         with (tmp_path / run / "imitation.csv").open() as handle:
             logged = list(csv.DictReader(handle))
-        assert [row["driver"] for row in logged] == ["oracle", "policy"] == [row["driver"] for row in rows]
-        assert [int(row["labels"]) for row in logged] == [16, 32]
+        assert [row["driver"] for row in logged] == ["oracle", "policy", "policy"] == [r["driver"] for r in rows]
+        assert [row["trains"] for row in logged] == ["actor", "actor", "critic"]
+        assert [int(row["labels"]) for row in logged] == [16, 32, 16]
         assert 0.0 <= float(logged[1]["agreement"]) <= 1.0
     assert torch.equal(weights[0], weights[1])
 
