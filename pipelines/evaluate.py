@@ -60,8 +60,8 @@ def _evaluate(profile: Profile, profile_name: str, method: Method, name: str, pr
     sim, protocol = profile.sim, profile.evaluate
     workspace = workspace_record(Path("."), profile)
     loaded = load_method(method, workspace, profile, zero_shot, training_seed)
-    train_steps = {task: json.loads((folder / "summary.json").read_text())["steps"]
-                   for task, folder in loaded.folders.items()} or None
+    summaries = {task: json.loads((folder / "summary.json").read_text()) for task, folder in loaded.folders.items()}
+    train_steps = {task: summary["steps"] for task, summary in summaries.items()} or None
     policy_arena = read_signature(loaded.folders["pick"] / "meta.json").arena if loaded.folders else sim.arena
     run_jobs = None
     if protocol.workers > 1 or protocol.backend == "ray":
@@ -72,7 +72,7 @@ def _evaluate(profile: Profile, profile_name: str, method: Method, name: str, pr
     started = time.perf_counter()
     records = run_protocol(loaded, sim, protocol.seeds, protocol.episodes, paths.EVAL / f"{name}.jsonl",
                            protocol.n_envs, progress, protocol.horizon, run_jobs)
-    row = {"method": method.name, "encoder": profile.policy.baseline.encoder if method.is_baseline else None,
+    row = {"method": method.name, "encoder": baseline_recipe(summaries, profile) if method.is_baseline else None,
            "arena": sim.arena, "policy_arena": policy_arena, "n_objects": sim.n_objects,
            "seeds": protocol.seeds, "episodes_per_seed": protocol.episodes, "train_steps": train_steps,
            "metrics": metric_summaries(records, protocol.bootstrap_resamples), "profile": profile_name,
@@ -81,6 +81,14 @@ def _evaluate(profile: Profile, profile_name: str, method: Method, name: str, pr
            "wall_seconds": round(time.perf_counter() - started, 1), "workers": protocol.workers,
            "played_by": loaded.played_by()}
     return row
+
+
+def baseline_recipe(summaries: dict[str, dict[str, Any]], profile: Profile) -> str:
+    """How a baseline's skills were made, as its row and tables name it: their encoder (the profile's, for policies
+    whose summary predates the field), and "+ oracle DAgger" where a skill imitated the oracle before PPO."""
+    encoders = {summary.get("encoder", profile.policy.baseline.encoder) for summary in summaries.values()}
+    imitated = any(summary.get("imitation", {}).get("rounds", 0) for summary in summaries.values())
+    return " / ".join(sorted(encoders)) + (" + oracle DAgger" if imitated else "")
 
 
 def policy_video(profile: Profile, method_name: str, seed: int, out: Path) -> dict[str, float]:

@@ -105,10 +105,11 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
             params, signature, run_dir, seed, f"{variant.name} {task}" + (f" seed {seed}" if seed else ""),
             progress, init_from, policy_kwargs=baseline_extractor(policy.baseline) if variant.is_baseline else None,
             initialize=_baseline_start(profile, variant, task, params, seed, run_dir, pretrained, progress)
+            if variant.is_baseline else None,
+            recipe={"encoder": policy.baseline.encoder, "imitation": policy.baseline.imitation.model_dump()}
             if variant.is_baseline else None)
         publish(run_dir, policy_folder(paths.POLICY_CARD, variant.name, task, seed))
-        summaries.append({**summary, "encoder": policy.baseline.encoder,
-                          "imitation": policy.baseline.imitation.model_dump()} if variant.is_baseline else summary)
+        summaries.append(summary)
     return summaries
 
 

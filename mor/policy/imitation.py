@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch
 from sb3_contrib.common.maskable.policies import MaskableActorCriticPolicy
@@ -38,6 +39,7 @@ from tqdm import tqdm
 from mor.atomic import atomic_output
 from mor.policy.params import ImitationParams
 from mor.sim.oracle import Oracle
+from mor.sim.rules import Action, visible
 from mor.sim.tasks import DropEnv, PickEnv
 
 IMITATION_LOG = "imitation.csv"
@@ -65,18 +67,42 @@ class Labelled:
         return len(self.actions)
 
 
-def oracle_actions(env: DummyVecEnv, oracles: list[Oracle]) -> np.ndarray:
-    """The oracle's next action in each env of ``env`` (N,), from its true state: Pick's goal object, Drop's target."""
-    actions = []
-    for oracle, wrapped in zip(oracles, env.envs, strict=True):
-        base = wrapped.unwrapped
-        if isinstance(base, PickEnv):
-            actions.append(oracle.pick(base.state, base.goal_object))
-        elif isinstance(base, DropEnv):
-            actions.append(oracle.drop(base.state, base.goal_position))
-        else:
+class Expert:
+    """The labels' source for one env: ``mor.sim.oracle.Oracle``, which reads the true state. With ``look_first``,
+    in Pick it first turns left on the spot until the target is in view (at most ``FULL_TURN`` turns), as a policy
+    that sees only its frame must search; from then on, or after a full turn that did not show it, it is the oracle.
+    (The oracle alone turns at once towards a target out of view, which no frame tells.)"""
+
+    FULL_TURN = 36  # TURN_LEFT steps of 10 degrees
+
+    def __init__(self, env: gym.Env, look_first: bool) -> None:
+        base = env.unwrapped
+        self.oracle, self.look_first = Oracle(base.arena, base.noise), look_first
+        self.turns, self.searching = 0, look_first
+
+    def reset(self) -> None:
+        """A new episode begins."""
+        self.oracle.reset()
+        self.turns, self.searching = 0, self.look_first
+
+    def act(self, env: gym.Env) -> int:
+        """The next action in ``env``'s current state (Pick: towards its goal object; Drop: its target)."""
+        base = env.unwrapped
+        if isinstance(base, DropEnv):
+            return self.oracle.drop(base.state, base.goal_position)
+        if not isinstance(base, PickEnv):
             raise TypeError(f"imitation clones Pick or Drop skills, not {type(base).__name__}")
-    return np.asarray(actions, np.int64)
+        if self.searching and (visible(base.state, base.goal_object) or self.turns >= self.FULL_TURN):
+            self.searching = False
+        if self.searching:
+            self.turns += 1
+            return int(Action.TURN_LEFT)
+        return self.oracle.pick(base.state, base.goal_object)
+
+
+def expert_actions(env: DummyVecEnv, experts: list[Expert]) -> np.ndarray:
+    """Each expert's next action in its env of ``env`` (N,)."""
+    return np.asarray([expert.act(wrapped) for expert, wrapped in zip(experts, env.envs, strict=True)], np.int64)
 
 
 def discounted_returns(rewards: np.ndarray, dones: np.ndarray, gamma: float) -> np.ndarray:
@@ -89,22 +115,22 @@ def discounted_returns(rewards: np.ndarray, dones: np.ndarray, gamma: float) -> 
     return returns
 
 
-def drive(env: DummyVecEnv, oracles: list[Oracle], policy: MaskableActorCriticPolicy | None, steps: int,
+def drive(env: DummyVecEnv, experts: list[Expert], policy: MaskableActorCriticPolicy | None, steps: int,
           gamma: float, seed: int, bar: tqdm) -> tuple[Labelled, dict[str, float]]:
     """About ``steps`` steps of ``env`` (whole vector steps) from a fresh reset seeded by ``seed``, driven by the
-    oracle (``policy`` None) or by ``policy``; every step labelled with the oracle's action. Returns the labels and
+    experts (``policy`` None) or by ``policy``; every step labelled with the expert's action. Returns the labels and
     the round's figures: episodes ended, their success rate, and the policy's agreement with the oracle (its most
     likely action; NaN when the oracle drove)."""
     env.seed(seed)
     observation = env.reset()
-    for oracle in oracles:
-        oracle.reset()
+    for expert in experts:
+        expert.reset()
     frames: dict[str, list[np.ndarray]] = {key: [] for key in observation}
     actions, masks, rewards, dones, agreed = [], [], [], [], []
     successes: list[float] = []
     for _ in range(-(-steps // env.num_envs)):
         mask = get_action_masks(env)
-        label = oracle_actions(env, oracles)
+        label = expert_actions(env, experts)
         for key, value in observation.items():
             frames[key].append(value)
         if policy is None:
@@ -116,7 +142,7 @@ def drive(env: DummyVecEnv, oracles: list[Oracle], policy: MaskableActorCriticPo
                 agreed.append(distribution.mode().numpy() == label)
         observation, reward, done, infos = env.step(action)
         for index in np.flatnonzero(done):
-            oracles[index].reset()
+            experts[index].reset()
             successes.append(float(infos[index]["metrics"]["success"]))
         actions.append(label), masks.append(mask), rewards.append(reward), dones.append(done)
         bar.update(env.num_envs)
@@ -168,7 +194,7 @@ def clone_oracle(policy: MaskableActorCriticPolicy, env: DummyVecEnv, settings: 
     """Train ``policy`` to imitate the oracle on ``env`` (in-process Pick or Drop envs seen as the policy sees
     them): ``settings.rounds`` rounds for the actor, one for the critic (module docstring); the rounds' rows, also
     written to ``log_path``."""
-    oracles = [Oracle(wrapped.unwrapped.arena, wrapped.unwrapped.noise) for wrapped in env.envs]
+    experts = [Expert(wrapped, settings.look_first) for wrapped in env.envs]
     generator = torch.Generator().manual_seed(seed)
     round_seeds = np.random.SeedSequence([seed, 7919]).generate_state(settings.rounds + 1)
     parts: list[Labelled] = []
@@ -179,7 +205,7 @@ def clone_oracle(policy: MaskableActorCriticPolicy, env: DummyVecEnv, settings: 
         for round_index, round_seed in enumerate(round_seeds):
             critic = round_index == settings.rounds
             driver = None if round_index == 0 else policy
-            labelled, figures = drive(env, oracles, driver, settings.round_steps, gamma, int(round_seed), bar)
+            labelled, figures = drive(env, experts, driver, settings.round_steps, gamma, int(round_seed), bar)
             parts.append(labelled)
             losses = fit(policy, labelled if critic else Labelled.join(parts), settings,
                          generator, critic)

@@ -63,6 +63,8 @@ class ImitationParams(ParamsModel):
     epochs: int = Field(4, ge=1, description="passes over every label so far after each round")
     batch_size: int = Field(256, ge=1)
     learning_rate: float = Field(3e-4, gt=0, description="Adam's")
+    look_first: bool = Field(True, description="Pick's expert turns on the spot until the target is in view before "
+                                               "it follows the oracle (mor.policy.imitation.Expert)")
 
 
 class BaselineParams(ParamsModel):

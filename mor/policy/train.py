@@ -204,12 +204,14 @@ def train_policy(
     make_env: Callable[[], VecEnv], params: PPOParams, signature: PolicySignature, out_dir: Path, seed: int,
     label: str, progress: bool = True, init_from: tuple[Path, list[str]] | None = None,
     policy_kwargs: dict[str, Any] | None = None, initialize: Callable[[torch.nn.Module], None] | None = None,
+    recipe: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Train (or resume) one MaskablePPO policy for ``params.steps`` steps on ``make_env()``'s environments
     (``mor.policy.envs.make_training_env``). init_from: (a policy's policy.pth, its feature names) to start from
     (``warm_start``) instead of a random initialization. Dict observations (the baselines) get SB3's
     ``MultiInputPolicy`` with ``policy_kwargs`` (e.g. the image encoder), flat vectors the ``MlpPolicy``.
-    initialize: called with a new policy (not a resumed one) before training, e.g. to load a pretrained encoder."""
+    initialize: called with a new policy (not a resumed one) before training, e.g. to load a pretrained encoder;
+    recipe: what else made the policy (a baseline's encoder and imitation), written into ``summary.json``."""
     torch.set_num_threads(1)  # 2.4-10x faster than torch's default on 2 cores (docs/design.md, "Decisions")
     out_dir.mkdir(parents=True, exist_ok=True)
     checkpoint = out_dir / CHECKPOINT_FILE
@@ -262,7 +264,7 @@ def train_policy(
                "warm_start_from": str(init_from[0]) if init_from is not None else None,
                "wall_seconds_this_run": round(wall, 1),
                "steps_per_second_this_run": round(trained / wall, 1) if trained > 0 else None,
-               "params": params.model_dump(), "signature": signature.model_dump()}
+               "params": params.model_dump(), "signature": signature.model_dump(), **(recipe or {})}
     with atomic_output(out_dir / "summary.json") as partial:
         partial.write_text(json.dumps(summary, indent=2) + "\n")
     return summary

@@ -13,10 +13,11 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 from mor.policy.baselines import BaselineObservation, baseline_extractor
 from mor.policy.envs import make_task_env
-from mor.policy.imitation import Labelled, clone_oracle, discounted_returns, drive, fit, oracle_actions
+from mor.policy.imitation import Expert, clone_oracle, discounted_returns, drive, expert_actions, fit
 from mor.policy.params import BaselineParams, ImitationParams
 from mor.sim.config import SimConfig
 from mor.sim.oracle import Oracle
+from mor.sim.rules import Action, visible
 
 SIM = SimConfig(n_objects=3, image_size=32)
 
@@ -32,8 +33,8 @@ def new_policy(env: DummyVecEnv, seed: int = 0) -> torch.nn.Module:
                        policy_kwargs={"net_arch": [16, 16], **kwargs}).policy
 
 
-def oracles_of(env: DummyVecEnv) -> list[Oracle]:
-    return [Oracle(e.unwrapped.arena, e.unwrapped.noise) for e in env.envs]
+def experts_of(env: DummyVecEnv, look_first: bool = False) -> list[Expert]:
+    return [Expert(e, look_first) for e in env.envs]
 
 
 def test_discounted_returns_stop_at_each_episodes_end() -> None:
@@ -46,11 +47,11 @@ def test_discounted_returns_stop_at_each_episodes_end() -> None:
 @pytest.mark.parametrize("task", ["pick", "drop"])
 def test_the_labels_are_the_oracles_actions_and_the_oracle_drives_round_zero(task: str) -> None:
     env = baseline_envs(task)
-    oracles = oracles_of(env)
+    experts = experts_of(env)
     env.seed(4)
     env.reset()
-    expected = oracle_actions(env, oracles_of(env))
-    data, figures = drive(env, oracles, None, steps=12, gamma=0.99, seed=4, bar=_no_bar())
+    expected = expert_actions(env, experts_of(env))
+    data, figures = drive(env, experts, None, steps=12, gamma=0.99, seed=4, bar=_no_bar())
     assert len(data) == 12 and data.actions[:2].tolist() == expected.tolist()
     assert data.observations["image"].shape == (12, 3, 32, 32)
     assert data.masks[np.arange(12), data.actions].all()  # the oracle only takes allowed actions
@@ -61,7 +62,7 @@ def test_the_labels_are_the_oracles_actions_and_the_oracle_drives_round_zero(tas
 def test_the_actor_learns_the_oracles_labels_and_the_critic_its_returns_without_moving_the_actor() -> None:
     env = baseline_envs("pick")
     policy = new_policy(env)
-    data, _ = drive(env, oracles_of(env), None, steps=64, gamma=0.99, seed=0, bar=_no_bar())
+    data, _ = drive(env, experts_of(env), None, steps=64, gamma=0.99, seed=0, bar=_no_bar())
     settings = ImitationParams(rounds=1, epochs=1, batch_size=32, learning_rate=3e-3)
     still = settings.model_copy(update={"learning_rate": 1e-12})
     before = fit(policy, data, still, torch.Generator().manual_seed(0))
@@ -72,6 +73,25 @@ def test_the_actor_learns_the_oracles_labels_and_the_critic_its_returns_without_
     critic = fit(policy, data, still, torch.Generator().manual_seed(0))
     assert critic["value_mse"] < 0.5 * actor["value_mse"]
     assert critic["action_nll"] == pytest.approx(actor["action_nll"], abs=1e-5)
+    env.close()
+
+
+def test_the_pick_expert_looks_for_the_target_before_it_follows_the_oracle() -> None:
+    env = baseline_envs("pick", n=1)
+    for seed in range(20):
+        env.seed(seed)
+        env.reset()
+        base = env.envs[0].unwrapped
+        if not visible(base.state, base.goal_object):
+            break
+    expert, oracle = Expert(env.envs[0], look_first=True), Oracle(base.arena, base.noise)
+    turns = 0
+    while not visible(base.state, base.goal_object) and turns < Expert.FULL_TURN:
+        assert expert.act(env.envs[0]) == Action.TURN_LEFT
+        env.step(np.array([Action.TURN_LEFT]))
+        turns += 1
+    assert 0 < turns
+    assert expert.act(env.envs[0]) == oracle.pick(base.state, base.goal_object)
     env.close()
 
 
