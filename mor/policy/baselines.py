@@ -165,8 +165,9 @@ class BaselineExtractor(BaseFeaturesExtractor):
 
 
 def baseline_extractor(settings: BaselineParams) -> dict[str, Any]:
-    """SB3 ``policy_kwargs`` of a baseline skill: ``BaselineExtractor`` with the profile's encoder and width."""
-    return {"features_extractor_class": BaselineExtractor,
+    """SB3 ``policy_kwargs`` of a baseline skill: ``BaselineExtractor`` with the profile's encoder and width, one for
+    the actor and the critic or one each (``settings.share_encoder``)."""
+    return {"features_extractor_class": BaselineExtractor, "share_features_extractor": settings.share_encoder,
             "features_extractor_kwargs": {"encoder": settings.encoder, "image_features": settings.image_features,
                                           "latent_channels": settings.pretrain.latent_channels}}
 

@@ -1,23 +1,23 @@
-"""Behaviour cloning from the scripted oracle with DAgger rounds: where a pixel baseline's skill starts before PPO.
+"""Behaviour cloning from a scripted expert with DAgger rounds: where a pixel baseline's skill starts before PPO.
 
 PPO from pixels never meets a rewarded PICK often enough to learn it (docs/results.md, "Why Pick from pixels does
 not learn"): a PICK with nothing in reach ends the episode unpaid, so PPO drives PICK out first. Here the skill
-first imitates ``mor.sim.oracle.Oracle``, which reads the true state, and PPO then trains it as before.
+first imitates an ``Expert`` built on ``mor.sim.oracle.Oracle``, which reads the true state.
 
-- Round 0: the oracle drives ``round_steps`` steps of the training envs; every observation the baseline sees is
-  labelled with the oracle's action.
-- Each later round: the policy being cloned drives (sampling its masked distribution) and the oracle labels what
+- Round 0: the expert drives ``round_steps`` steps of the training envs; every observation the baseline sees is
+  labelled with the expert's action.
+- Each later round: the policy being cloned drives (sampling its masked distribution) and the expert labels what
   it meets (DAgger, Ross, Gordon and Bagnell, AISTATS 2011), so the labels cover the policy's own mistakes.
-- After each round the actor trains on every label so far: the oracle action's negative log-likelihood under the
+- After each round the actor trains on every label so far: the expert action's negative log-likelihood under the
   masked distribution.
 - Then the critic: the cloned policy drives one more round, and the value head (the critic's layers only, the
-  shared encoder frozen) trains on the discounted returns of its own episodes. PPO's first advantages then measure
-  the policy it starts from; a critic left at random, or fitted to the oracle's far better returns, makes every
-  PICK look worse than expected and PPO drives PICK out again (a run that skipped this step ended at success 0).
+  shared encoder frozen) trains on the discounted returns of its own episodes, so that PPO's first advantages
+  measure the policy it starts from rather than the expert's far better returns.
 
-The oracle's labels use what the baseline cannot see (where an object out of view lies); the policy learns what
-the pixels allow. The rounds' figures (who drove, its success, the agreement with the oracle before training on
-the round, the wall seconds so far) go to ``imitation.csv``. Same seed, same envs and parameters: the same labels and weights.
+The expert's labels use what the baseline cannot see (where an object out of view lies); ``Expert`` searches as a
+pixel policy must before it uses that. The rounds' figures (who drove, its success, the agreement with the expert
+before training on the round, the wall seconds so far) go to ``imitation.csv``. Same seed, envs and parameters:
+the same labels and weights.
 """
 
 from __future__ import annotations
@@ -119,8 +119,8 @@ def drive(env: DummyVecEnv, experts: list[Expert], policy: MaskableActorCriticPo
           gamma: float, seed: int, bar: tqdm) -> tuple[Labelled, dict[str, float]]:
     """About ``steps`` steps of ``env`` (whole vector steps) from a fresh reset seeded by ``seed``, driven by the
     experts (``policy`` None) or by ``policy``; every step labelled with the expert's action. Returns the labels and
-    the round's figures: episodes ended, their success rate, and the policy's agreement with the oracle (its most
-    likely action; NaN when the oracle drove)."""
+    the round's figures: episodes ended, their success rate, and the policy's agreement with the expert (its most
+    likely action; NaN when the expert drove)."""
     env.seed(seed)
     observation = env.reset()
     for expert in experts:
@@ -164,7 +164,7 @@ def critic_parameters(policy: MaskableActorCriticPolicy) -> list[torch.nn.Parame
 def fit(policy: MaskableActorCriticPolicy, data: Labelled, settings: ImitationParams, generator: torch.Generator,
         critic: bool = False) -> dict[str, float]:
     """``settings.epochs`` passes over ``data`` in minibatches of ``settings.batch_size`` (Adam,
-    ``settings.learning_rate``): the actor (every trainable parameter) on the oracle action's negative
+    ``settings.learning_rate``): the actor (every trainable parameter) on the expert action's negative
     log-likelihood, or with ``critic`` the ``critic_parameters`` on the value's squared error against the returns.
     Both losses' means over the last epoch."""
     trained = critic_parameters(policy) if critic else [p for p in policy.parameters() if p.requires_grad]
@@ -191,7 +191,7 @@ def fit(policy: MaskableActorCriticPolicy, data: Labelled, settings: ImitationPa
 
 def clone_oracle(policy: MaskableActorCriticPolicy, env: DummyVecEnv, settings: ImitationParams, gamma: float,
                  seed: int, log_path: Path, progress: bool = True) -> list[dict[str, Any]]:
-    """Train ``policy`` to imitate the oracle on ``env`` (in-process Pick or Drop envs seen as the policy sees
+    """Train ``policy`` to imitate the ``Expert`` on ``env`` (in-process Pick or Drop envs seen as the policy sees
     them): ``settings.rounds`` rounds for the actor, one for the critic (module docstring); the rounds' rows, also
     written to ``log_path``."""
     experts = [Expert(wrapped, settings.look_first) for wrapped in env.envs]
@@ -209,7 +209,7 @@ def clone_oracle(policy: MaskableActorCriticPolicy, env: DummyVecEnv, settings: 
             parts.append(labelled)
             losses = fit(policy, labelled if critic else Labelled.join(parts), settings,
                          generator, critic)
-            rows.append({"round": round_index, "driver": "oracle" if driver is None else "policy",
+            rows.append({"round": round_index, "driver": "expert" if driver is None else "policy",
                          "trains": "critic" if critic else "actor", "steps": len(labelled),
                          **{k: round(v, 4) for k, v in figures.items()},
                          "labels": len(labelled) if critic else sum(len(p) for p in parts), **losses,

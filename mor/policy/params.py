@@ -75,6 +75,8 @@ class BaselineParams(ParamsModel):
                                   "encoder (any frame size); resnet18/50: the paper's; autoencoder: pretrained "
                                   "without labels (mor policy pretrain-encoder) and frozen")
     image_features: int = Field(256, ge=8, description="the encoder's output width (autoencoder: its code's size)")
+    share_encoder: bool = Field(True, description="the actor and the critic read one encoder (SB3's default), or each "
+                                                  "its own, so that the value loss cannot move the actor's features")
     pretrain: EncoderPretrainParams = Field(default_factory=EncoderPretrainParams)
     imitation: ImitationParams = Field(default_factory=ImitationParams)
     pick: PPOParams = Field(default_factory=PPOParams)

@@ -107,7 +107,7 @@ def test_clone_oracle_logs_its_rounds_and_repeats_itself_with_the_same_seed(tmp_
         weights.append(torch.cat([p.detach().flatten() for p in policy.parameters()]))
         with (tmp_path / run / "imitation.csv").open() as handle:
             logged = list(csv.DictReader(handle))
-        assert [row["driver"] for row in logged] == ["oracle", "policy", "policy"] == [r["driver"] for r in rows]
+        assert [row["driver"] for row in logged] == ["expert", "policy", "policy"] == [r["driver"] for r in rows]
         assert [row["trains"] for row in logged] == ["actor", "actor", "critic"]
         assert [int(row["labels"]) for row in logged] == [16, 32, 16]
         assert 0.0 <= float(logged[1]["agreement"]) <= 1.0
