@@ -9,6 +9,7 @@ and kept otherwise, so a fresh clone (whose ``datasets/`` is empty) still shows 
 
 from __future__ import annotations
 
+import csv
 import json
 import re
 from collections.abc import Callable
@@ -17,6 +18,7 @@ from typing import Any
 
 import yaml
 
+from mor.policy.names import IMITATION_LOG
 from pipelines import paths
 from pipelines.io import write_json
 
@@ -52,12 +54,23 @@ def stage_seconds(root: Path) -> dict[str, float]:
     for summary in sorted((root / paths.POLICY_CARD).glob("*/*/summary.json")):
         document = _read(summary) or {}
         if document.get("wall_seconds_this_run") is not None:
-            found[f"policy train {summary.parent.parent.name} {summary.parent.name}"] = document["wall_seconds_this_run"]
+            found[f"policy train {summary.parent.parent.name} {summary.parent.name}"] = (
+                document["wall_seconds_this_run"] + imitation_seconds(summary.parent / IMITATION_LOG))
     for row_file in sorted((root / paths.RESULTS_CARD / "rows").glob("*.json")):
         document = _read(row_file) or {}
         if document.get("wall_seconds") is not None:
             found[f"eval run {row_file.stem}"] = document["wall_seconds"]
     return found
+
+
+def imitation_seconds(log: Path) -> float:
+    """The wall seconds of a baseline's imitation start before its PPO run (the last row of its ``imitation.csv``;
+    0 where it had none)."""
+    if not log.is_file():
+        return 0.0
+    with log.open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    return float(rows[-1]["seconds"]) if rows else 0.0
 
 
 def _has(document: dict[str, Any], seconds: Callable[[dict[str, Any]], float]) -> bool:

@@ -20,8 +20,8 @@ from mor.policy.baselines import baseline_extractor, load_pretrained_encoder
 from mor.policy.envs import make_training_env
 from mor.policy.frame_encoder import ENCODER_FILE
 from mor.policy.hierarchy import POLICY_FILE, Skill
-from mor.policy.imitation import IMITATION_LOG, clone_oracle
-from mor.policy.names import TASKS, Task
+from mor.policy.imitation import clone_oracle
+from mor.policy.names import IMITATION_LOG, TASKS, Task
 from mor.policy.params import PPOParams
 from mor.policy.plan import TaskPlan, training_plan
 from mor.policy.signature import PolicySignature, warm_start_names

@@ -212,10 +212,11 @@ def test_baseline_stages_train_evaluate_and_fill_table_1(workspace: Path) -> Non
     assert missing.exit_code == 2 and "baseline_delta_pose/drop/meta.json" in missing.output
     _run("eval", "results", "--profile", "tiny")
     row = json.loads((workspace / "cards/results/results.json").read_text())["rows"][0]
-    assert row["method"] == "baseline_landmark" and row["encoder"] == tiny["policy"]["baseline"]["encoder"]
+    assert tiny["policy"]["baseline"]["imitation"]["rounds"] > 0  # the tiny profile's skills imitate first
+    assert row["method"] == "baseline_landmark" and row["encoder"] == "compact + oracle DAgger"
     assert row["train_steps"] == {"pick": 64, "drop": 64}
     readme = (workspace / "cards/results/README.md").read_text()
-    assert "| Baseline: CNN + Landmark (paper: ResNet18 + Landmark) [ours: compact] |" in readme
+    assert "| Baseline: CNN + Landmark (paper: ResNet18 + Landmark) [ours: compact + oracle DAgger] |" in readme
     compute = json.loads((workspace / "cards/results/compute.json").read_text())
     assert set(compute["stages"]) == {"policy train baseline_img pick", "policy train baseline_img drop",
                                       "policy train baseline_landmark drop", "eval run baseline_landmark"}
@@ -240,7 +241,8 @@ def test_a_pretrained_encoder_is_published_and_stays_frozen_in_a_baselines_train
     pretrained = read_frame_autoencoder(card / "encoder.pth")["encoder"]
     trained = load_policy_file(workspace / "cards/policy/baseline_img/pick/policy.pth").state_dict()
     for name, tensor in pretrained.items():
-        torch.testing.assert_close(trained[f"features_extractor.encoder.0.{name}"], tensor, rtol=0, atol=0)
+        for extractor in ("features_extractor", "vf_features_extractor"):  # the critic has its own (share_encoder)
+            torch.testing.assert_close(trained[f"{extractor}.encoder.0.{name}"], tensor, rtol=0, atol=0)
     _run("eval", "results", "--profile", "tiny")
     compute = json.loads((workspace / "cards/results/compute.json").read_text())
     assert "pretrain-encoder" in compute["stages"]
@@ -266,10 +268,15 @@ def test_compute_sums_each_workspaces_stages_and_all_of_them(tmp_path: Path, mon
         (rows / "lnet.json").write_text(json.dumps({"wall_seconds": seconds}))
     (Path("cards/results/rows") / "lnet.seed_1.json").write_text(json.dumps({"wall_seconds": 50.0}))
     (Path("cards/results/rows") / "lnet_search.json").write_text(json.dumps({"wall_seconds": 40.0}))
+    skill = Path("cards/policy/baseline_img/pick")  # a baseline's imitation start counts with its PPO run
+    skill.mkdir(parents=True)
+    (skill / "summary.json").write_text(json.dumps({"wall_seconds_this_run": 10.0}))
+    (skill / "imitation.csv").write_text("round,seconds\n0,2.5\n1,4.0\n")
     Path("dvc.yaml").write_text(yaml.safe_dump({"stages": {"evaluate": {
         "matrix": {"method": ["lnet"]}, "cmd": "mor eval run --method ${item.method}"}}}))
     compute = update_compute(Path("compute.json"), "tiny")
-    assert compute["stages"]["polygon: eval run lnet"] == 30.0 and compute["total_seconds"] == 96.0
-    assert compute["workspace_seconds"] == {"main": 60.0, "objects_2": 6.0, "polygon": 30.0}
+    assert compute["stages"]["polygon: eval run lnet"] == 30.0 and compute["total_seconds"] == 110.0
+    assert compute["stages"]["policy train baseline_img pick"] == 14.0
+    assert compute["workspace_seconds"] == {"main": 74.0, "objects_2": 6.0, "polygon": 30.0}
     assert compute["extra_runs"] == ["eval run lnet.seed_1", "eval run lnet_search"]  # not what dvc repro runs
     assert compute["extra_seconds"] == 90.0

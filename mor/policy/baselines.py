@@ -182,9 +182,9 @@ def load_pretrained_encoder(path: Path) -> Callable[[torch.nn.Module], None]:
     saved = read_frame_autoencoder(path)
 
     def initialize(policy: torch.nn.Module) -> None:
-        target = policy.features_extractor.encoder[0]
-        try:
-            target.load_state_dict(saved["encoder"])
+        try:  # the actor's encoder, and the critic's where it has its own (``share_encoder`` false)
+            for extractor in {policy.features_extractor, policy.vf_features_extractor}:
+                extractor.encoder[0].load_state_dict(saved["encoder"])
         except RuntimeError:
             raise ConfigError(f"{path}: made with latent_channels {saved['latent_channels']}, other than "
                               f"policy.baseline.pretrain.latent_channels; run mor policy pretrain-encoder again"

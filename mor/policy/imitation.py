@@ -42,7 +42,6 @@ from mor.sim.oracle import Oracle
 from mor.sim.rules import Action, visible
 from mor.sim.tasks import DropEnv, PickEnv
 
-IMITATION_LOG = "imitation.csv"
 LOG_FIELDS = ("round", "driver", "trains", "steps", "episodes", "success", "agreement", "labels", "action_nll", "value_mse",
               "seconds")
 

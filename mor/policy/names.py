@@ -15,3 +15,5 @@ TASKS: tuple[Task, ...] = ("pick", "drop", "decision")
 PLAYS: dict[Task, WorldTask] = dict(zip(TASKS, WORLD_TASKS, strict=True))
 #: the policy that plays each of the world's tasks
 PLAYED_BY: dict[WorldTask, Task] = {world: policy for policy, world in PLAYS.items()}
+#: the rounds of a baseline skill's imitation start, beside its policy (``mor.policy.imitation``)
+IMITATION_LOG = "imitation.csv"

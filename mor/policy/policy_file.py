@@ -82,7 +82,7 @@ def architecture_of(policy: MaskableActorCriticPolicy) -> dict[str, Any]:
             "ortho_init": bool(data["ortho_init"]), "normalize_images": bool(data["normalize_images"]),
             "features_extractor_class": data["features_extractor_class"].__name__,
             "features_extractor_kwargs": data["features_extractor_kwargs"],
-            "share_features_extractor": bool(data.get("share_features_extractor", True)),
+            "share_features_extractor": bool(policy.share_features_extractor),  # not in SB3's record above
             "optimizer_kwargs": data["optimizer_kwargs"]}
 
 

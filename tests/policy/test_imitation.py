@@ -15,6 +15,7 @@ from mor.policy.baselines import BaselineObservation, baseline_extractor
 from mor.policy.envs import make_task_env
 from mor.policy.imitation import Expert, clone_oracle, discounted_returns, drive, expert_actions, fit
 from mor.policy.params import BaselineParams, ImitationParams
+from mor.policy.policy_file import load_policy_file, save_policy_file
 from mor.sim.config import SimConfig
 from mor.sim.oracle import Oracle
 from mor.sim.rules import Action, visible
@@ -120,3 +121,18 @@ def _no_bar() -> object:
             pass
 
     return Bar()
+
+
+@pytest.mark.parametrize("share", [True, False])
+def test_a_saved_baseline_acts_as_it_did_whether_or_not_its_critic_has_its_own_encoder(tmp_path: Path,
+                                                                                      share: bool) -> None:
+    env = baseline_envs("pick", n=1)
+    kwargs = baseline_extractor(BaselineParams(encoder="compact", image_features=16, share_encoder=share))
+    policy = MaskablePPO("MultiInputPolicy", env, seed=0, policy_kwargs={"net_arch": [16], **kwargs}).policy
+    save_policy_file(policy, tmp_path / "policy.pth")
+    loaded = load_policy_file(tmp_path / "policy.pth")
+    assert loaded.share_features_extractor is share
+    observation, _ = policy.obs_to_tensor(env.reset())
+    torch.testing.assert_close(loaded.get_distribution(observation).distribution.logits,
+                               policy.get_distribution(observation).distribution.logits)
+    env.close()
