@@ -101,11 +101,13 @@ def test_the_object_order_rule_takes_the_object_after_the_last() -> None:
 
 
 class _Policy(torch.nn.Module):
-    """What the encoder loader reads of an SB3 policy: its features extractor."""
+    """What the encoder loader reads of an SB3 policy: the actor's features extractor and the critic's (the same
+    one where they share it)."""
 
-    def __init__(self, extractor: BaselineExtractor) -> None:
+    def __init__(self, extractor: BaselineExtractor, critic: BaselineExtractor | None = None) -> None:
         super().__init__()
         self.features_extractor = extractor
+        self.vf_features_extractor = critic if critic is not None else extractor
 
 
 PRETRAIN = EncoderPretrainParams(frames=48, episode_steps=16, steps=30, batch_size=8, log_every=10,
@@ -135,9 +137,11 @@ def test_the_autoencoder_extractor_is_frozen_and_loads_the_pretrained_weights(tm
         load_pretrained_encoder(tmp_path / "encoder.pth")
     model = frame_autoencoder(4)
     save_frame_autoencoder(model, 4, tmp_path / "encoder.pth")
-    load_pretrained_encoder(tmp_path / "encoder.pth")(_Policy(extractor))
-    for mine, theirs in zip(extractor.encoder[0].state_dict().values(), model[0].state_dict().values(), strict=True):
-        torch.testing.assert_close(mine, theirs, rtol=0, atol=0)
+    critic = BaselineExtractor(env.observation_space, "autoencoder", latent_channels=4)  # share_encoder false
+    load_pretrained_encoder(tmp_path / "encoder.pth")(_Policy(extractor, critic))
+    for loaded in (extractor, critic):
+        for mine, theirs in zip(loaded.encoder[0].state_dict().values(), model[0].state_dict().values(), strict=True):
+            torch.testing.assert_close(mine, theirs, rtol=0, atol=0)
     save_frame_autoencoder(frame_autoencoder(8), 8, tmp_path / "wide.pth")
     with pytest.raises(ConfigError, match=r"wide.pth: made with latent_channels 8"):
         load_pretrained_encoder(tmp_path / "wide.pth")(_Policy(extractor))
