@@ -15,7 +15,7 @@ from mor.eval.methods import (NEAREST_RULE_VARIANTS, RULE_SUFFIX, method_spec, p
 from mor.eval.failures import sum_endings
 from mor.eval.paper import LOWER_IS_BETTER
 from mor.eval.stats import probability_of_improvement, summarize_runs
-from mor.policy.variants import VARIANTS
+from mor.policy.variants import OURS, VARIANTS
 from mor.policy.workspace import Workspace
 
 #: a row's identity; ``episodes`` is None for the protocol's evaluation seeds, "held_out" for others
@@ -125,10 +125,11 @@ def run_outcomes(row: dict[str, Any]) -> list[dict[str, dict[str, list[float]]]]
 
 
 #: the pairs a results file compares (a, b): each variant with its uncertainty against its ablation (paper Table 2),
-#: each variant that reads the stated belief against the one that reads its Gaussian only, and each learned
-#: decision against the nearest-unfixed-object rule
+#: ours against each end-to-end baseline (paper Table 1), each variant that reads the stated belief against the one
+#: that reads its Gaussian only, and each learned decision against the nearest-unfixed-object rule
 COMPARED: tuple[tuple[str, str], ...] = (
     *((variant.ablation_of, name) for name, variant in VARIANTS.items() if variant.ablation_of),
+    *((OURS.name, name) for name, variant in VARIANTS.items() if variant.is_baseline),
     *((name, other) for name, variant in VARIANTS.items() if variant.search for other, plain in VARIANTS.items()
       if (plain.source, plain.uncertainty, plain.search) == (variant.source, variant.uncertainty, False)),
     *((name, name + RULE_SUFFIX) for name in NEAREST_RULE_VARIANTS),
