@@ -8,15 +8,15 @@ first imitates an ``Expert`` built on ``mor.sim.oracle.Oracle``, which reads the
   labelled with the expert's action.
 - Each later round: the policy being cloned drives (sampling its masked distribution) and the expert labels what
   it meets (DAgger, Ross, Gordon and Bagnell, AISTATS 2011), so the labels cover the policy's own mistakes.
-- After each round the actor trains on every label so far: the expert action's negative log-likelihood under the
-  masked distribution.
+- After each round the actor trains on every label so far (kept in one ``LabelBuffer``): the expert action's
+  negative log-likelihood under the masked distribution.
 - Then the critic: the cloned policy drives one more round, and the value head (the critic's layers only, the
   shared encoder frozen) trains on the discounted returns of its own episodes, so that PPO's first advantages
   measure the policy it starts from rather than the expert's far better returns.
 
 The expert's labels use what the baseline cannot see (where an object out of view lies); ``Expert`` searches as a
 pixel policy must before it uses that. The rounds' figures (who drove, its success, the agreement with the expert
-before training on the round, the wall seconds so far) go to ``imitation.csv``. Same seed, envs and parameters:
+before training on the round, the trained head's loss, the wall seconds so far) go to ``imitation.csv``. Same seed, envs and parameters:
 the same labels and weights.
 """
 
@@ -56,14 +56,41 @@ class Labelled:
     masks: np.ndarray
     returns: np.ndarray
 
-    @staticmethod
-    def join(parts: list[Labelled]) -> Labelled:
-        return Labelled({key: np.concatenate([p.observations[key] for p in parts]) for key in parts[0].observations},
-                        np.concatenate([p.actions for p in parts]), np.concatenate([p.masks for p in parts]),
-                        np.concatenate([p.returns for p in parts]))
-
     def __len__(self) -> int:
         return len(self.actions)
+
+
+class LabelBuffer:
+    """Every round's labels in arrays allocated once for ``capacity`` steps: ``add`` copies a round in, ``labels``
+    is a view of what is filled (no round is copied twice)."""
+
+    def __init__(self, capacity: int) -> None:
+        self.capacity, self.filled = capacity, 0
+        self.arrays: Labelled | None = None
+
+    def add(self, part: Labelled) -> None:
+        """Append ``part`` (raises when the buffer would overflow)."""
+        if self.arrays is None:
+            def empty(array: np.ndarray) -> np.ndarray:
+                return np.empty((self.capacity, *array.shape[1:]), array.dtype)
+            self.arrays = Labelled({key: empty(value) for key, value in part.observations.items()},
+                                   empty(part.actions), empty(part.masks), empty(part.returns))
+        end = self.filled + len(part)
+        if end > self.capacity:
+            raise ValueError(f"imitation: {end} labels overflow the buffer of {self.capacity}")
+        for key, value in part.observations.items():
+            self.arrays.observations[key][self.filled:end] = value
+        for name in ("actions", "masks", "returns"):
+            getattr(self.arrays, name)[self.filled:end] = getattr(part, name)
+        self.filled = end
+
+    def labels(self) -> Labelled:
+        """The labels added so far (views into the buffer)."""
+        if self.arrays is None:
+            raise ValueError("imitation: no labels yet")
+        return Labelled({key: value[:self.filled] for key, value in self.arrays.observations.items()},
+                        self.arrays.actions[:self.filled], self.arrays.masks[:self.filled],
+                        self.arrays.returns[:self.filled])
 
 
 class Expert:
@@ -164,28 +191,29 @@ def fit(policy: MaskableActorCriticPolicy, data: Labelled, settings: ImitationPa
         critic: bool = False) -> dict[str, float]:
     """``settings.epochs`` passes over ``data`` in minibatches of ``settings.batch_size`` (Adam,
     ``settings.learning_rate``): the actor (every trainable parameter) on the expert action's negative
-    log-likelihood, or with ``critic`` the ``critic_parameters`` on the value's squared error against the returns.
-    Both losses' means over the last epoch."""
+    log-likelihood (``action_nll``), or with ``critic`` the ``critic_parameters`` on the value's squared error
+    against the returns (``value_mse``); only the trained head runs. That loss's mean over the last epoch."""
     trained = critic_parameters(policy) if critic else [p for p in policy.parameters() if p.requires_grad]
     optimizer = torch.optim.Adam(trained, lr=settings.learning_rate)
     policy.set_training_mode(True)
-    losses: dict[str, list[float]] = {"action_nll": [], "value_mse": []}
+    losses: list[float] = []
     for _ in range(settings.epochs):
-        losses = {key: [] for key in losses}
+        losses = []
         for batch in torch.randperm(len(data), generator=generator).split(settings.batch_size):
             index = batch.numpy()
             observation, _ = policy.obs_to_tensor({key: value[index] for key, value in data.observations.items()})
-            values, log_prob, _ = policy.evaluate_actions(observation, torch.as_tensor(data.actions[index]),
-                                                          action_masks=data.masks[index])
-            action_nll = -log_prob.mean()
-            value_mse = torch.nn.functional.mse_loss(values.flatten(), torch.as_tensor(data.returns[index]))
+            if critic:
+                loss = torch.nn.functional.mse_loss(policy.predict_values(observation).flatten(),
+                                                    torch.as_tensor(data.returns[index]))
+            else:
+                distribution = policy.get_distribution(observation, action_masks=data.masks[index])
+                loss = -distribution.log_prob(torch.as_tensor(data.actions[index])).mean()
             optimizer.zero_grad()
-            (value_mse if critic else action_nll).backward()
+            loss.backward()
             optimizer.step()
-            losses["action_nll"].append(action_nll.item())
-            losses["value_mse"].append(value_mse.item())
+            losses.append(loss.item())
     policy.set_training_mode(False)
-    return {key: round(float(np.mean(value)), 5) for key, value in losses.items()}
+    return {"value_mse" if critic else "action_nll": round(float(np.mean(losses)), 5)}
 
 
 def clone_oracle(policy: MaskableActorCriticPolicy, env: DummyVecEnv, settings: ImitationParams, gamma: float,
@@ -196,7 +224,7 @@ def clone_oracle(policy: MaskableActorCriticPolicy, env: DummyVecEnv, settings: 
     experts = [Expert(wrapped, settings.look_first) for wrapped in env.envs]
     generator = torch.Generator().manual_seed(seed)
     round_seeds = np.random.SeedSequence([seed, 7919]).generate_state(settings.rounds + 1)
-    parts: list[Labelled] = []
+    buffer = LabelBuffer(settings.rounds * env.num_envs * -(-settings.round_steps // env.num_envs))
     rows: list[dict[str, Any]] = []
     started = time.monotonic()
     with tqdm(total=(settings.rounds + 1) * settings.round_steps, desc="imitation", unit="step",
@@ -205,15 +233,15 @@ def clone_oracle(policy: MaskableActorCriticPolicy, env: DummyVecEnv, settings: 
             critic = round_index == settings.rounds
             driver = None if round_index == 0 else policy
             labelled, figures = drive(env, experts, driver, settings.round_steps, gamma, int(round_seed), bar)
-            parts.append(labelled)
-            losses = fit(policy, labelled if critic else Labelled.join(parts), settings,
-                         generator, critic)
+            if not critic:
+                buffer.add(labelled)
+            data = labelled if critic else buffer.labels()
+            losses = fit(policy, data, settings, generator, critic)
             rows.append({"round": round_index, "driver": "expert" if driver is None else "policy",
                          "trains": "critic" if critic else "actor", "steps": len(labelled),
-                         **{k: round(v, 4) for k, v in figures.items()},
-                         "labels": len(labelled) if critic else sum(len(p) for p in parts), **losses,
+                         **{k: round(v, 4) for k, v in figures.items()}, "labels": len(data), **losses,
                          "seconds": round(time.monotonic() - started, 1)})
-            bar.set_postfix(success=f"{figures['success']:.2f}", nll=f"{losses['action_nll']:.3f}")
+            bar.set_postfix(success=f"{figures['success']:.2f}", **{k: f"{v:.3f}" for k, v in losses.items()})
             write_log(log_path, rows)
     return rows
 
