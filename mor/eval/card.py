@@ -95,9 +95,21 @@ def column_name(row: dict[str, Any]) -> str:
     return f"`{row['method']}`" + (" (held-out)" if row.get("episodes") == "held_out" else "")
 
 
+def same_runs_metrics(protocol: dict[str, Any], held: dict[str, Any]) -> tuple[dict[str, Any], list[int]]:
+    """The protocol row's metrics over the training runs the held-out row played, and their seeds: the aggregate
+    where both played the same runs, that run's own metrics where the held-out row played one of the protocol's
+    runs, else (other runs) the protocol's aggregate."""
+    seeds = list(held.get("training_seeds") or [])
+    runs = [run for run in protocol.get("runs") or [] if run["training_seed"] in seeds]
+    if seeds != list(protocol.get("training_seeds") or []) and len(seeds) == len(runs) == 1:
+        return runs[0]["metrics"], seeds
+    return protocol["metrics"], list(protocol.get("training_seeds") or [])
+
+
 def held_out_section(rows: list[dict[str, Any]]) -> list[str]:
     """The card's "Held-out episodes" section: each row evaluated on episode seeds outside the protocol (``mor eval
-    run --seeds``) beside its protocol row, so that a reader sees nothing was tuned to the protocol's episodes."""
+    run --seeds``) beside its protocol row over the same training runs (``same_runs_metrics``), so that a reader sees
+    nothing was tuned to the protocol's episodes."""
     pairs = []
     for held in (row for row in rows if row.get("episodes") == "held_out"):
         protocol = find_row(rows, {key: held[key] for key in ("method", "encoder", "arena", "policy_arena",
@@ -107,15 +119,16 @@ def held_out_section(rows: list[dict[str, Any]]) -> list[str]:
     if not pairs:
         return []
     lines = ["", "## Held-out episodes", "", "Each metric on the protocol's evaluation seeds and on seeds it never "
-             "used, mean [95% interval].", "",
-             "| method | training runs (protocol / held out) | seeds (protocol / held out) | "
+             "used, mean [95% interval], played by the same training runs where the held-out row names one of the "
+             "protocol's.", "",
+             "| method | training seeds (protocol / held out) | evaluation seeds (protocol / held out) | "
              + " | ".join(METRIC_LABELS[m] for m in METRIC_NAMES) + " |", "|---|---|---|" + "---|" * len(METRIC_NAMES)]
     for protocol, held in pairs:
-        cells = [" / ".join(f"{row['metrics'][m]['mean']:.3f} [{row['metrics'][m]['ci95'][0]:.3f}, "
-                            f"{row['metrics'][m]['ci95'][1]:.3f}]" for row in (protocol, held)) for m in METRIC_NAMES]
-        runs = " / ".join(str(len(row.get("training_seeds") or [])) for row in (protocol, held))
-        lines.append(f"| `{held['method']}` | {runs} | {protocol['seeds']} / {held['seeds']} | " + " | ".join(cells)
-                     + " |")
+        protocol_metrics, protocol_seeds = same_runs_metrics(protocol, held)
+        cells = [" / ".join(f"{metrics[m]['mean']:.3f} [{metrics[m]['ci95'][0]:.3f}, {metrics[m]['ci95'][1]:.3f}]"
+                            for metrics in (protocol_metrics, held["metrics"])) for m in METRIC_NAMES]
+        lines.append(f"| `{held['method']}` | {protocol_seeds} / {list(held.get('training_seeds') or [])} | "
+                     f"{protocol['seeds']} / {held['seeds']} | " + " | ".join(cells) + " |")
     return lines
 
 

@@ -119,3 +119,16 @@ def test_the_mark_against_the_paper_follows_our_interval_not_our_mean() -> None:
     assert verdict({"mean": 0.4, "ci95": [0.35, 0.45]}, paper, "pick_success") == "worse"
     assert verdict({"mean": 0.4, "ci95": [0.35, 0.45]}, paper, "energy_remaining") == "better"  # lower is better
 
+
+
+def test_held_out_episodes_sit_beside_the_protocol_row_of_the_same_training_run() -> None:
+    from mor.eval.card import held_out_section
+
+    protocol = {**_row("lnet", 0.5), "training_seeds": [0, 1],
+                "runs": [{"training_seed": 0, "metrics": _row("lnet", 0.6)["metrics"]},
+                         {"training_seed": 1, "metrics": _row("lnet", 0.4)["metrics"]}]}
+    held = {**_row("lnet", 0.55), "seeds": [100, 101], "episodes": "held_out", "training_seeds": [0]}
+    line = held_out_section([protocol, held])[-1]
+    assert line.startswith("| `lnet` | [0] / [0] | [0, 1] / [100, 101] | 0.600 [0.580, 0.620] / 0.550 [0.530, 0.570]")
+    both = held_out_section([protocol, {**held, "training_seeds": [0, 1]}])[-1]
+    assert "| [0, 1] / [0, 1] |" in both and "0.500 [0.480, 0.520] / 0.550" in both
