@@ -18,7 +18,7 @@ from typing import Any
 
 import yaml
 
-from mor.policy.names import IMITATION_LOG
+from mor.policy.names import IMITATION_LOG, TASKS
 from pipelines import paths
 from pipelines.io import write_json
 
@@ -45,22 +45,39 @@ def _read(path: Path) -> dict[str, Any] | None:
 
 def stage_seconds(root: Path) -> dict[str, float]:
     """Each stage's wall seconds in the workspace at ``root``, where its file says (a policy's or an evaluation's
-    last run: a resumed one counts from its restart)."""
+    last run: a resumed one counts from its restart; another training seed's run is ``policy train lnet.seed_2
+    pick``)."""
     found: dict[str, float] = {}
     for stage, (path, seconds) in FILE_SOURCES.items():
         document = _read(root / path)
         if document is not None and _has(document, seconds):
             found[stage] = float(seconds(document))
-    for summary in sorted((root / paths.POLICY_CARD).glob("*/*/summary.json")):
-        document = _read(summary) or {}
-        if document.get("wall_seconds_this_run") is not None:
-            found[f"policy train {summary.parent.parent.name} {summary.parent.name}"] = (
-                document["wall_seconds_this_run"] + imitation_seconds(summary.parent / IMITATION_LOG))
+    policies = root / paths.POLICY_CARD
+    for log in sorted([*policies.glob("*/*/log.csv"), *policies.glob("*/seed_*/*/log.csv")]):
+        skill = log.parent
+        if skill.name not in TASKS:
+            continue
+        variant = skill.parent.name if skill.parent.parent == policies else (
+            f"{skill.parent.parent.name}.{skill.parent.name}")  # lnet.seed_2
+        seconds = training_seconds(skill)
+        if seconds is not None:
+            found[f"policy train {variant} {skill.name}"] = seconds
     for row_file in sorted((root / paths.RESULTS_CARD / "rows").glob("*.json")):
         document = _read(row_file) or {}
         if document.get("wall_seconds") is not None:
             found[f"eval run {row_file.stem}"] = document["wall_seconds"]
     return found
+
+
+def training_seconds(skill: Path) -> float | None:
+    """The wall seconds of a skill's last training run (``cards/policy/VARIANT[/seed_S]/TASK``): its summary's, with
+    a baseline's imitation start; where a copied run kept no summary, the last row of its ``log.csv``."""
+    summary = _read(skill / "summary.json") or {}
+    if summary.get("wall_seconds_this_run") is not None:
+        return float(summary["wall_seconds_this_run"]) + imitation_seconds(skill / IMITATION_LOG)
+    with (skill / "log.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    return float(rows[-1]["wall_seconds"]) if rows and rows[-1].get("wall_seconds") else None
 
 
 def imitation_seconds(log: Path) -> float:

@@ -271,13 +271,18 @@ def test_compute_sums_each_workspaces_stages_and_all_of_them(tmp_path: Path, mon
     skill = Path("cards/policy/baseline_img/pick")  # a baseline's imitation start counts with its PPO run
     skill.mkdir(parents=True)
     (skill / "summary.json").write_text(json.dumps({"wall_seconds_this_run": 10.0}))
+    (skill / "log.csv").write_text("steps,wall_seconds\n2048,1.0\n")
     (skill / "imitation.csv").write_text("round,seconds\n0,2.5\n1,4.0\n")
+    seed_skill = Path("cards/policy/lnet/seed_2/drop")  # another training seed's run, copied without its summary
+    seed_skill.mkdir(parents=True)
+    (seed_skill / "log.csv").write_text("steps,wall_seconds\n2048,3.0\n4096,7.0\n")
     Path("dvc.yaml").write_text(yaml.safe_dump({"stages": {"evaluate": {
         "matrix": {"method": ["lnet"]}, "cmd": "mor eval run --method ${item.method}"}}}))
     compute = update_compute(Path("compute.json"), "tiny")
     assert compute["stages"]["polygon: eval run lnet"] == 30.0 and compute["total_seconds"] == 96.0
     assert compute["stages"]["policy train baseline_img pick"] == 14.0  # beside dvc.yaml's stages here: extra
     assert compute["workspace_seconds"] == {"main": 60.0, "objects_2": 6.0, "polygon": 30.0}
+    assert compute["stages"]["policy train lnet.seed_2 drop"] == 7.0
     assert compute["extra_runs"] == ["eval run lnet.seed_1", "eval run lnet_search",  # not what dvc repro runs
-                                     "policy train baseline_img pick"]
-    assert compute["extra_seconds"] == 104.0
+                                     "policy train baseline_img pick", "policy train lnet.seed_2 drop"]
+    assert compute["extra_seconds"] == 111.0
