@@ -106,7 +106,7 @@ def play_records(loaded: LoadedMethod, sim: SimConfig, keys: list[EpisodeKey], n
     scripted ones play one at a time. ``horizon``: a cap on every episode's steps."""
     import torch  # noqa: PLC0415
 
-    torch.set_num_threads(1)  # small batched forwards: one thread is several times faster on 2 cores (DESIGN.md)
+    torch.set_num_threads(1)  # small batched forwards: one thread is several times faster on 2 cores (docs/design.md, "Threads")
     env_kwargs = {} if horizon is None else {"horizon": horizon}
     for (task, seed, episode), outcome in _play(loaded, sim, keys, n_envs, env_kwargs):
         yield {"method": loaded.method.name, "task": task, "seed": seed, "episode": episode,

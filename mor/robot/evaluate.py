@@ -50,7 +50,7 @@ def play_sim_loop(loop: str, controller: Controller, sim: SimConfig, params: Rob
     simulator (``loop``: aruco_topdown renders the top camera); record each run to
     ``runs_dir/recordings/<id>.mcap`` and its episode to ``runs_dir/episodes/<id>.mcap`` (frames at ``fps``).
     Returns every record of ``keys``, in their order."""
-    torch.set_num_threads(1)  # small forwards of one robot: one thread is faster on 2 cores (DESIGN.md)
+    torch.set_num_threads(1)  # small forwards of one robot: one thread is faster on 2 cores (docs/design.md, "Threads")
     method = controller.policy.method
     done = {(r["seed"], r["episode"]): r for r in read_records(records_path) if r["method"] == method}
     todo = [key for key in keys if key not in done]
