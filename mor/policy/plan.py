@@ -7,7 +7,8 @@ Starts (docs/assumptions.md, "Policies"):
 - otherwise a variant with a ``warm_start`` (``mor.policy.variants``) starts from this workspace's policy of that
   variant when ``policy.lnet_warm_start``;
 - a policy that starts from another trains ``policy.lnet_steps[task]`` steps, not its task's ``steps``;
-- the baselines train their own skills (``Variant.trains``) from scratch with ``policy.baseline``'s parameters.
+- the baselines train their own skills (``Variant.trains``) from scratch with ``policy.baseline``'s parameters,
+  after its imitation start where ``policy.baseline.imitation.rounds`` > 0.
 """
 
 from __future__ import annotations
@@ -53,8 +54,10 @@ def training_plan(profile: Profile, variant: Variant, tasks: tuple[Task, ...], o
     policies of the same training seed."""
     policy = profile.policy
     if variant.is_baseline:
-        return [TaskPlan(task, getattr(policy.baseline, task), None,
-                         f"from a random start, encoder {policy.baseline.encoder}")
+        baseline = policy.baseline
+        start = (f"from {baseline.imitation.rounds} DAgger rounds of {baseline.imitation.round_steps:,} steps "
+                 f"imitating the scripted oracle" if baseline.imitation.rounds else "from a random start")
+        return [TaskPlan(task, getattr(baseline, task), None, f"{start}, encoder {baseline.encoder}")
                 for task in variant.trains if task in tasks]
     plans = []
     for task in tasks:

@@ -64,7 +64,7 @@ def test_baselines_refuse_unrendered_envs() -> None:
         BaselineObservation(make_task_env("pick", SIM, render_frames=False), "img")
 
 
-@pytest.mark.parametrize("encoder", ["compact", "nature_cnn"])
+@pytest.mark.parametrize("encoder", ["compact", "nature_cnn", "resnet18", "resnet50"])
 def test_the_extractor_concatenates_image_features_and_the_one_hot_goal(encoder: str) -> None:
     sim = SimConfig(n_objects=3, image_size=48)  # NatureCNN needs frames of at least 36 pixels
     env = BaselineObservation(make_task_env("drop", sim, render_frames=True), "delta_pose")
