@@ -65,7 +65,7 @@ class SettingParams(ParamsModel):
                                                     "of the setting's own)")
     finetune_from_main: bool = Field(False, description="every variant's policies start from the main workspace's "
                                                         "policy of the same variant and task and train the "
-                                                        "profile's policy.lnet_steps more")
+                                                        "profile's policy.finetune_steps more")
 
 
 class Profile(ParamsModel):

@@ -142,6 +142,9 @@ class PolicyParams(ParamsModel):
     observation: ObservationParams = Field(default_factory=ObservationParams)
     lnet_steps: dict[Task, int] = Field(default_factory=lambda: {"pick": 100_000, "drop": 100_000, "decision": 0},
                                         description="fine-tuning steps of the L-Net variants when warm-started")
+    finetune_steps: dict[Task, int] = Field(default_factory=lambda: {"pick": 100_000, "drop": 100_000, "decision": 0},
+                                            description="steps a setting with finetune_from_main (paper Tables 3 "
+                                                        "and 4) trains the main workspace's policies more")
 
     @field_validator("variants")
     @classmethod

@@ -6,7 +6,8 @@ Starts (docs/assumptions.md, "Policies"):
   only where its action space, one action per object, is the same);
 - otherwise a variant with a ``warm_start`` (``mor.policy.variants``) starts from this workspace's policy of that
   variant when ``policy.lnet_warm_start``;
-- a policy that starts from another trains ``policy.lnet_steps[task]`` steps, not its task's ``steps``;
+- a policy that starts from the main workspace's trains ``policy.finetune_steps[task]`` steps, one that starts from
+  its warm-start variant's ``policy.lnet_steps[task]`` steps, not its task's ``steps``;
 - the baselines train their own skills (``Variant.trains``) from scratch with ``policy.baseline``'s parameters,
   after its imitation start where ``policy.baseline.imitation.rounds`` > 0.
 """
@@ -35,16 +36,17 @@ class TaskPlan:
 
 
 def _start(profile: Profile, variant: Variant, task: Task, own: Path, main: Path, seed: int
-           ) -> tuple[Path | None, str]:
+           ) -> tuple[Path | None, str, str | None]:
+    """(the policy folder it starts from or None, why, the ``policy`` field naming its steps or None)."""
     setting, policy = profile.setting, profile.policy
     if setting is not None and setting.finetune_from_main:
         source = policy_folder(main, variant.name, task, seed)
         if task != "decision" or read_signature(source / "meta.json").n_objects == profile.sim.n_objects:
-            return source, "fine-tunes the main workspace's policy (setting.finetune_from_main)"
+            return source, "fine-tunes the main workspace's policy (setting.finetune_from_main)", "finetune_steps"
     if variant.warm_start is not None and policy.lnet_warm_start:
         return (policy_folder(own, variant.warm_start, task, seed),
-                f"fine-tunes this workspace's {variant.warm_start} policy (policy.lnet_warm_start)")
-    return None, "from a random start"
+                f"fine-tunes this workspace's {variant.warm_start} policy (policy.lnet_warm_start)", "lnet_steps")
+    return None, "from a random start", None
 
 
 def training_plan(profile: Profile, variant: Variant, tasks: tuple[Task, ...], own: Path, main: Path, seed: int = 0
@@ -61,10 +63,11 @@ def training_plan(profile: Profile, variant: Variant, tasks: tuple[Task, ...], o
                 for task in variant.trains if task in tasks]
     plans = []
     for task in tasks:
-        start, why = _start(profile, variant, task, own, main, seed)
+        start, why, steps_field = _start(profile, variant, task, own, main, seed)
         params = getattr(policy, task)
-        if start is not None:
-            params = params.model_copy(update={"steps": policy.lnet_steps[task]})
-            why += f"; policy.lnet_steps.{task} = {policy.lnet_steps[task]:,} steps replace {task}.steps"
+        if steps_field is not None:
+            steps = getattr(policy, steps_field)[task]
+            params = params.model_copy(update={"steps": steps})
+            why += f"; policy.{steps_field}.{task} = {steps:,} steps replace {task}.steps"
         plans.append(TaskPlan(task, params, start, why))
     return plans

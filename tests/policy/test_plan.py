@@ -42,6 +42,7 @@ def test_a_setting_fine_tunes_the_main_policies_and_its_own_decision_when_the_ob
                                                                                  "square", "x", FEATURES))
     plans = training_plan(profile, VARIANTS["lnet"], ("pick", "decision"), tmp_path / "own", main)
     assert plans[0].start == main / "lnet" / "pick" and "finetune_from_main" in plans[0].why
+    assert plans[0].params.steps == profile.policy.finetune_steps["pick"] != profile.policy.lnet_steps["pick"]
     assert plans[1].start == tmp_path / "own" / "gt_pose" / "decision"  # 3 decision actions there, 4 here
 
 
