@@ -116,7 +116,8 @@ def pick_probe(profile: Profile, variant_name: str, training_seed: int, episodes
     method = method_spec(variant_name)
     if method.variant is None:
         raise ConfigError(f"--variant: {variant_name!r} has no Pick skill to probe; choose a trained variant")
-    loaded = load_method(method, workspace_record(Path("."), profile), profile, training_seed=training_seed)
+    loaded = load_method(method, workspace_record(Path("."), profile), profile, training_seed=training_seed,
+                         tasks=("pick",))
     sim = sim_of(method, profile.sim)
     variant = method.skill_owners()["pick"]
     if variant.is_baseline:

@@ -210,6 +210,8 @@ def test_baseline_stages_train_evaluate_and_fill_table_1(workspace: Path) -> Non
     assert len(records) == 3 * len(protocol["seeds"]) * protocol["episodes"]
     missing = CliRunner().invoke(app, ["eval", "run", "--method", "baseline_delta_pose", "--profile", "tiny"])
     assert missing.exit_code == 2 and "baseline_delta_pose/drop/meta.json" in missing.output
+    # the probe loads the Pick alone: it plays where the variant's Drop was never trained (Table 3's +Img)
+    _run("eval", "probe-pick", "--variant", "baseline_delta_pose", "--episodes", "1", "--profile", "tiny")
     _run("eval", "results", "--profile", "tiny")
     row = json.loads((workspace / "cards/results/results.json").read_text())["rows"][0]
     assert tiny["policy"]["baseline"]["imitation"]["rounds"] > 0  # the tiny profile's skills imitate first

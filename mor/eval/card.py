@@ -66,7 +66,23 @@ def comparison_section(comparisons: list[dict[str, Any]]) -> list[str]:
         lines.append(f"| `{c['a']}` | `{c['b']}` | {runs} | {METRIC_LABELS[c['metric']]} | "
                      f"{c['difference']['mean']:+.3f} [{low:+.3f}, {high:+.3f}] | "
                      f"{c['probability_of_improvement']:.2f} | {c['verdict']} |")
-    return lines
+    return lines + unequal_budget_notes(comparisons)
+
+
+def unequal_budget_notes(comparisons: list[dict[str, Any]]) -> list[str]:
+    """A line for each compared pair whose skills trained for different steps (the rows' ``train_steps``): its
+    difference mixes what the methods observe with how long they trained."""
+    notes, seen = [], set()
+    for c in comparisons:
+        steps = c.get("train_steps") or {}
+        a, b = steps.get(c["a"]) or {}, steps.get(c["b"]) or {}
+        differing = [task for task in a if task in b and a[task] != b[task]]
+        if differing and (c["a"], c["b"]) not in seen:
+            seen.add((c["a"], c["b"]))
+            budgets = ", ".join(f"{task} {a[task]:,} / {b[task]:,}" for task in differing)
+            notes.append(f"- `{c['a']}` against `{c['b']}`: unequal budgets (steps, a / b: {budgets}); the "
+                         "difference mixes what they observe with how long they trained.")
+    return ["", *notes] if notes else []
 
 
 def failure_section(rows: list[dict[str, Any]]) -> list[str]:

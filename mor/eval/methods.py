@@ -8,7 +8,7 @@ are: ``learned`` (the variant's decision policy), ``nearest_rule`` (the nearest 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -77,10 +77,11 @@ def method_spec(name: str) -> Method:
 
 @dataclass
 class TrainedPolicies:
-    """A method's frozen policies: pick and drop skills and (for a learned decision) the decision policy."""
+    """A method's frozen policies: pick and drop skills and (for a learned decision) the decision policy; a skill
+    ``load_method`` was not asked for (``tasks``) is None."""
 
-    pick: Skill
-    drop: Skill
+    pick: Skill | None
+    drop: Skill | None
     decision: Skill | None
 
 
@@ -136,20 +137,21 @@ def policy_digests(folders: dict[Task, Path]) -> dict[str, str]:
 
 
 def load_method(method: Method, workspace: Workspace, profile: Profile, zero_shot: bool = False,
-                training_seed: int = 0) -> LoadedMethod:
+                training_seed: int = 0, tasks: Collection[Task] = TASKS) -> LoadedMethod:
     """``method``'s committed policies of its run with ``training_seed`` (each checked against its ``meta.json``:
     what it was trained on), its tracker factory and its L-Net; zero_shot: the main workspace's policies through
-    this workspace's L-Net."""
+    this workspace's L-Net; tasks: the policies to load (a probe of one skill needs no other)."""
     if method.variant is None:
         return LoadedMethod(method)
     from mor.policy.observations import GroundTruthBatchTracker, RenderingTruthTracker  # noqa: PLC0415
 
     sim, deterministic, features = profile.sim, profile.policy.skills_deterministic, profile.policy.observation
-    folders = policy_folders(method, policy_root(workspace, zero_shot), training_seed)
+    folders = {task: folder for task, folder in policy_folders(method, policy_root(workspace, zero_shot),
+                                                                training_seed).items() if task in tasks}
     runner = committed_lnet(workspace, method.variant, profile.lnet)
     version, stated = (runner.identity, runner.stated_identity) if runner is not None else (None, None)
     allow = ZERO_SHOT_FIELDS if zero_shot else ()
-    skills: dict[str, Skill | None] = {"decision": None}
+    skills: dict[str, Skill] = {}
     for task, folder in folders.items():
         owner = method.skill_owners()[task]
         expected = (PolicySignature.of_baseline(task, owner, sim.n_objects, sim.arena, sim.image_size)
@@ -157,7 +159,7 @@ def load_method(method: Method, workspace: Workspace, profile: Profile, zero_sho
                                                                  features, stated))
         check_signature(folder / "meta.json", expected, allow)
         skills[task] = Skill.load(folder / POLICY_FILE, deterministic)
-    policies = TrainedPolicies(skills["pick"], skills["drop"], skills["decision"])
+    policies = TrainedPolicies(skills.get("pick"), skills.get("drop"), skills.get("decision"))
     if runner is not None:
         from mor.policy.lnet_tracking import LNetBatchTracker  # noqa: PLC0415
 

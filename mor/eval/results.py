@@ -165,6 +165,7 @@ def compare(row_a: dict[str, Any], row_b: dict[str, Any], resamples: int = 10_00
         found.append({
             "a": a, "b": b, "metric": metric, "training_seeds": {a: row_a.get("training_seeds"),
                                                                  b: row_b.get("training_seeds")},
+            "train_steps": {a: row_a.get("train_steps"), b: row_b.get("train_steps")},
             "difference": {"mean": summary_a["mean"] - summary_b["mean"], "ci95": [low, high]},
             "probability_of_improvement": probability_of_improvement(
                 *(([np.concatenate(list(run.values())) * sign for run in runs]) for runs in (runs_a, runs_b))),

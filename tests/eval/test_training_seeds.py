@@ -74,6 +74,23 @@ def test_a_held_out_row_is_not_compared_in_place_of_the_protocol_row() -> None:
     assert found["pick_success"]["training_seeds"]["lnet"] == [0, 1, 2]
     assert found["pick_success"]["verdict"] == "no evidence"
 
+
+def test_the_card_says_where_a_compared_pair_trained_for_different_steps() -> None:
+    from mor.eval.card import comparison_section
+
+    def runs(method: str, pick_steps: int) -> list[dict]:
+        return [{**_row(method, s, 0.5), "train_steps": {"pick": pick_steps, "drop": 100}} for s in range(2)]
+
+    equal = comparison_section(comparisons(aggregate_runs(runs("lnet", 400) + runs("lnet_no_uncertainty", 400),
+                                                          200), 200))
+    assert not any("unequal budgets" in line for line in equal)
+    unequal = comparison_section(comparisons(aggregate_runs(runs("lnet_search", 100) + runs("lnet", 400), 200),
+                                             200))
+    assert [line for line in unequal if "unequal budgets" in line] == [
+        "- `lnet_search` against `lnet`: unequal budgets (steps, a / b: pick 100 / 400); the difference mixes what "
+        "they observe with how long they trained."]
+
+
 def test_mor_eval_compare_states_the_difference_of_two_folders_of_rows(tmp_path) -> None:
     """The same statistics as the results' comparisons, for any two rows: here gt_pose from two folders."""
     import json
