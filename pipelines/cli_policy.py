@@ -220,11 +220,13 @@ def eval_compare(
     found = compare(*rows, resamples, names=(a, b))
     for entry in found:
         low, high = entry["difference"]["ci95"]
+        sides = ", ".join(f"{name} {row['metrics'][entry['metric']]['mean']:.3f}" for name, row in zip("ab", rows))
         typer.echo(f"{entry['metric']}: {entry['difference']['mean']:+.3f} [{low:+.3f}, {high:+.3f}] "
-                   f"{entry['verdict']} (a: training seeds {entry['training_seeds'][a]}, b: "
+                   f"{entry['verdict']} ({sides}; a: training seeds {entry['training_seeds'][a]}, b: "
                    f"{entry['training_seeds'][b]})")
-    if out is not None:
-        typer.echo(f"wrote {write_json(out, {'a': a, 'b': b, 'comparisons': found})}")
+    if out is not None:  # each side's metrics (mean, std, 95% interval over its runs) beside the differences
+        metrics = {name: row["metrics"] for name, row in zip((a, b), rows)}
+        typer.echo(f"wrote {write_json(out, {'a': a, 'b': b, 'metrics': metrics, 'comparisons': found})}")
 
 
 @bench_app.command("policy")

@@ -72,16 +72,15 @@ def comparison_section(comparisons: list[dict[str, Any]]) -> list[str]:
 def unequal_budget_notes(comparisons: list[dict[str, Any]]) -> list[str]:
     """A line for each compared pair whose skills trained for different steps (the rows' ``train_steps``): its
     difference mixes what the methods observe with how long they trained."""
-    notes, seen = [], set()
-    for c in comparisons:
-        steps = c.get("train_steps") or {}
-        a, b = steps.get(c["a"]) or {}, steps.get(c["b"]) or {}
-        differing = [task for task in a if task in b and a[task] != b[task]]
-        if differing and (c["a"], c["b"]) not in seen:
-            seen.add((c["a"], c["b"]))
-            budgets = ", ".join(f"{task} {a[task]:,} / {b[task]:,}" for task in differing)
-            notes.append(f"- `{c['a']}` against `{c['b']}`: unequal budgets (steps, a / b: {budgets}); the "
-                         "difference mixes what they observe with how long they trained.")
+    budgets = {(c["a"], c["b"]): c.get("train_steps") or {} for c in comparisons}  # one entry per metric
+    notes = []
+    for (a, b), steps in budgets.items():
+        steps_a, steps_b = steps.get(a) or {}, steps.get(b) or {}
+        differing = ", ".join(f"{task} {steps_a[task]:,} / {steps_b[task]:,}" for task in steps_a
+                              if task in steps_b and steps_a[task] != steps_b[task])
+        if differing:
+            notes.append(f"- `{a}` against `{b}`: unequal budgets (steps, a / b: {differing}); the difference "
+                         "mixes what they observe with how long they trained.")
     return ["", *notes] if notes else []
 
 

@@ -110,7 +110,9 @@ def test_mor_eval_compare_states_the_difference_of_two_folders_of_rows(tmp_path)
                                       "--out", str(out), "--profile", "tiny"])
     assert result.exit_code == 0, result.output
     assert re.search(r"rearrange_success: \+0\.\d{3} \[\+0\.\d{3}, \+0\.\d{3}\] helps", result.output), result.output
-    found = {c["metric"]: c for c in json.loads(out.read_text())["comparisons"]}
+    written = json.loads(out.read_text())
+    found = {c["metric"]: c for c in written["comparisons"]}
+    assert written["metrics"][f"{tmp_path / 'new'}:gt_pose"]["pick_success"]["mean"] > 0.8  # each side's row too
     assert found["pick_success"]["training_seeds"][f"{tmp_path / 'new'}:gt_pose"] == [0, 1, 2]
     missing = CliRunner().invoke(app, ["eval", "compare", f"{tmp_path}:gt_pose", f"{tmp_path / 'old'}:gt_pose",
                                        "--profile", "tiny"])
