@@ -34,6 +34,10 @@ def policy_train(
     jobs: Annotated[int, typer.Option(min=1, help="Seeds trained at once (worker processes or Ray tasks).")] = 1,
     backend: Annotated[str, typer.Option(help="process (this machine) or ray (Ray tasks; a local Ray instance "
                                               "unless one is running).")] = "process",
+    more_steps: Annotated[int | None, typer.Option(
+        "--more-steps", help="A budget study: continue each task's committed policy (cards/policy/) for this many "
+                             "more steps; the card's policy is replaced, so run it in a copy of the repository.")
+    ] = None,
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
@@ -50,7 +54,7 @@ def policy_train(
         raise ConfigError(f"--backend: unknown backend {backend!r}; choose process or ray")
     config = load_profile(profile, params)
     seeds = _parse_seeds(seed, "--seed") if seed is not None else config.policy.training_seeds
-    for summaries in train_policy.run_seeds(config, chosen, tasks, seeds, jobs, backend):
+    for summaries in train_policy.run_seeds(config, chosen, tasks, seeds, jobs, backend, more_steps):
         for summary in summaries:
             typer.echo(f"{summary['label']}: {summary['steps']} steps")
 

@@ -49,38 +49,44 @@ def publish(run_dir: Path, card_dir: Path) -> None:
                 shutil.copyfile(run_dir / name, folder / name)
 
 
-def plan(profile: Profile, variant: Variant, tasks: tuple[Task, ...] = TASKS, seed: int = 0) -> list[TaskPlan]:
+def plan(profile: Profile, variant: Variant, tasks: tuple[Task, ...] = TASKS, seed: int = 0,
+         more_steps: int | None = None) -> list[TaskPlan]:
     """What ``run`` trains (``mor.policy.plan.training_plan`` with this workspace's and the main one's policies)."""
-    return training_plan(profile, variant, tasks, paths.POLICY_CARD, paths.MAIN / paths.POLICY_CARD, seed)
+    return training_plan(profile, variant, tasks, paths.POLICY_CARD, paths.MAIN / paths.POLICY_CARD, seed, more_steps)
 
 
-def run(profile: Profile, variant: Variant, tasks: tuple[Task, ...] = TASKS, seed: int = 0, progress: bool = True
-        ) -> list[dict]:
+def run(profile: Profile, variant: Variant, tasks: tuple[Task, ...] = TASKS, seed: int = 0, progress: bool = True,
+        more_steps: int | None = None) -> list[dict]:
     """Train ``tasks`` of ``variant`` with training seed ``seed``, in order (the decision needs the pick and drop
-    skills); resumable. One training of a variant's seed at a time (``writer_lock`` on its run folder)."""
+    skills); resumable. One training of a variant's seed at a time (``writer_lock`` on its run folder). With
+    ``more_steps``, each task continues its committed policy in a run folder of its own (``<task>.more_<N>``), and
+    the card's policy is replaced by the continued one."""
     with writer_lock(seed_folder(paths.POLICIES, variant.name, seed), f"mor policy train --variant {variant.name} --seed {seed}"):
-        return _train(profile, variant, tasks, seed, progress)
+        return _train(profile, variant, tasks, seed, progress, more_steps)
 
 
 def run_seeds(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seeds: list[int], jobs: int = 1,
-              backend: str = "process") -> Iterator[list[dict]]:
+              backend: str = "process", more_steps: int | None = None) -> Iterator[list[dict]]:
     """``run`` for each training seed of ``seeds``: in this process (``jobs`` 1), or as parallel jobs in worker
     processes or Ray tasks (``mor.data.parallel.unordered_map``); yields each seed's summaries as it finishes."""
+    for seed in seeds:  # a wrong --more-steps is one error line before any training starts
+        plan(profile, variant, tasks, seed, more_steps)
     if jobs <= 1 and backend == "process":
-        yield from (run(profile, variant, tasks, seed) for seed in seeds)
+        yield from (run(profile, variant, tasks, seed, more_steps=more_steps) for seed in seeds)
         return
-    yield from unordered_map(_seed_job, [(Path.cwd(), profile, variant.name, tasks, seed) for seed in seeds], jobs,
-                             backend)
+    yield from unordered_map(_seed_job, [(Path.cwd(), profile, variant.name, tasks, seed, more_steps)
+                                         for seed in seeds], jobs, backend)
 
 
-def _seed_job(job: tuple[Path, Profile, str, tuple[Task, ...], int]) -> list[dict]:
+def _seed_job(job: tuple[Path, Profile, str, tuple[Task, ...], int, int | None]) -> list[dict]:
     """One parallel training job (a worker process or a Ray task): one seed of a variant, without progress bars."""
-    workspace, profile, name, tasks, seed = job
+    workspace, profile, name, tasks, seed, more_steps = job
     os.chdir(workspace)  # the workspace's relative paths (a Ray worker starts elsewhere)
-    return run(profile, VARIANTS[name], tasks, seed, progress=False)
+    return run(profile, VARIANTS[name], tasks, seed, progress=False, more_steps=more_steps)
 
 
-def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: int, progress: bool) -> list[dict]:
+def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: int, progress: bool,
+           more_steps: int | None) -> list[dict]:
     """``run``'s work, under the lock of the seed's run: each task of the plan trained, then published to its card."""
     policy, sim = profile.policy, profile.sim
     runner = committed_lnet(workspace_record(Path("."), profile), variant, profile.lnet)
@@ -88,7 +94,7 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
     pretrained = (load_pretrained_encoder(paths.ENCODER_CARD / ENCODER_FILE)
                   if variant.is_baseline and policy.baseline.encoder == "autoencoder" else None)
     summaries = []
-    for task_plan in plan(profile, variant, tasks, seed):
+    for task_plan in plan(profile, variant, tasks, seed, more_steps):
         task, params, source = task_plan.task, task_plan.params, task_plan.start
         skills = None
         if task == "decision":
@@ -100,6 +106,8 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
         init_from = None if source is None else (source / POLICY_FILE,
                                                  warm_start_names(source / "meta.json", signature))
         run_dir = policy_folder(paths.POLICIES, variant.name, task, seed)
+        if more_steps is not None:  # not the original run's folder, whose finished checkpoint would be resumed
+            run_dir = run_dir.with_name(f"{task}.more_{more_steps}")
         summary = train_policy(
             lambda: make_training_env(task, variant, sim, params, policy.observation, runner, skills),  # noqa: B023
             params, signature, run_dir, seed, f"{variant.name} {task}" + (f" seed {seed}" if seed else ""),

@@ -9,7 +9,10 @@ Starts (docs/assumptions.md, "Policies"):
 - a policy that starts from the main workspace's trains ``policy.finetune_steps[task]`` steps, one that starts from
   its warm-start variant's ``policy.lnet_steps[task]`` steps, not its task's ``steps``;
 - the baselines train their own skills (``Variant.trains``) from scratch with ``policy.baseline``'s parameters,
-  after its imitation start where ``policy.baseline.imitation.rounds`` > 0.
+  after its imitation start where ``policy.baseline.imitation.rounds`` > 0;
+- with ``more_steps`` (``mor policy train --more-steps N``, a budget study) every task instead continues this
+  workspace's committed policy of the same variant, task and seed for N more steps (not for the baselines, whose
+  start is an imitation of the oracle).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mor.config import Profile
+from mor.errors import ConfigError
 from mor.policy.names import Task
 from mor.policy.params import PPOParams
 from mor.policy.signature import read_signature
@@ -49,12 +53,23 @@ def _start(profile: Profile, variant: Variant, task: Task, own: Path, main: Path
     return None, "from a random start", None
 
 
-def training_plan(profile: Profile, variant: Variant, tasks: tuple[Task, ...], own: Path, main: Path, seed: int = 0
-                  ) -> list[TaskPlan]:
+def training_plan(profile: Profile, variant: Variant, tasks: tuple[Task, ...], own: Path, main: Path, seed: int = 0,
+                  more_steps: int | None = None) -> list[TaskPlan]:
     """The plan of ``tasks`` (in order) of ``variant``'s run with training seed ``seed``; ``own`` and ``main``: the
     committed policy folders (``cards/policy``) of this workspace and of the main one. A run starts from the
-    policies of the same training seed."""
+    policies of the same training seed; with ``more_steps``, from its own committed ones (ConfigError for a
+    baseline or ``more_steps`` < 1)."""
     policy = profile.policy
+    if more_steps is not None:
+        if variant.is_baseline:
+            raise ConfigError(f"--more-steps: {variant.name} is a baseline, whose skills start from an imitation of "
+                              "the oracle; continue an observation variant (gt_pose, lnet, ...) instead")
+        if more_steps < 1:
+            raise ConfigError(f"--more-steps: {more_steps} is not a number of steps; give a positive integer")
+        return [TaskPlan(task, getattr(policy, task).model_copy(update={"steps": more_steps}),
+                         policy_folder(own, variant.name, task, seed),
+                         f"continues this workspace's committed policy for {more_steps:,} more steps (--more-steps)")
+                for task in tasks]
     if variant.is_baseline:
         baseline = policy.baseline
         start = (f"from {baseline.imitation.rounds} DAgger rounds of {baseline.imitation.round_steps:,} steps "

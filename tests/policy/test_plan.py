@@ -51,3 +51,17 @@ def test_mor_policy_plan_prints_each_task_its_steps_and_its_start() -> None:
     assert result.exit_code == 0, result.output
     assert "pick: 32 steps, fine-tunes this workspace's gt_pose policy" in result.output
     assert "n_epochs 1" in result.output
+
+
+def test_more_steps_continues_the_committed_policies_and_refuses_a_baseline(tmp_path: Path) -> None:
+    profile = load_profile("default")
+    plans = training_plan(profile, VARIANTS["lnet"], ("pick", "drop"), tmp_path / "own", tmp_path / "main", seed=2,
+                          more_steps=400_000)
+    assert [(p.start, p.params.steps) for p in plans] == [
+        (tmp_path / "own" / "lnet" / "seed_2" / "pick", 400_000), (tmp_path / "own" / "lnet" / "seed_2" / "drop", 400_000)]
+    assert "--more-steps" in plans[0].why and plans[0].params.n_epochs == profile.policy.pick.n_epochs
+    result = CliRunner().invoke(app, ["policy", "train", "--profile", "tiny", "--variant", "baseline_img",
+                                      "--more-steps", "10"])
+    assert result.exit_code != 0 and "--more-steps: baseline_img is a baseline" in result.output
+    result = CliRunner().invoke(app, ["policy", "train", "--profile", "tiny", "--variant", "lnet", "--more-steps", "0"])
+    assert result.exit_code != 0 and "--more-steps: 0 is not a number of steps" in result.output
