@@ -35,7 +35,7 @@ def policy_train(
     backend: Annotated[str, typer.Option(help="process (this machine) or ray (Ray tasks; a local Ray instance "
                                               "unless one is running).")] = "process",
     more_steps: Annotated[int | None, typer.Option(
-        "--more-steps", help="A budget study: continue each task's committed policy (cards/policy/) for this many "
+        "--more-steps", min=1, help="A budget study: continue each task's committed policy (cards/policy/) for this many "
                              "more steps; the card's policy is replaced, so run it in a copy of the repository.")
     ] = None,
     profile: ProfileOption = None,

@@ -63,7 +63,7 @@ def training_plan(profile: Profile, variant: Variant, tasks: tuple[Task, ...], o
     if more_steps is not None:
         if variant.is_baseline:
             raise ConfigError(f"--more-steps: {variant.name} is a baseline, whose skills start from an imitation of "
-                              "the oracle; continue an observation variant (gt_pose, lnet, ...) instead")
+                              "the oracle; continue a variant that learns from poses instead")
         if more_steps < 1:
             raise ConfigError(f"--more-steps: {more_steps} is not a number of steps; give a positive integer")
         return [TaskPlan(task, getattr(policy, task).model_copy(update={"steps": more_steps}),

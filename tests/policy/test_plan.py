@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 from mor.config import load_profile
+from mor.errors import ConfigError
 from mor.policy.params import ObservationParams
 from mor.policy.plan import training_plan
 from mor.policy.signature import PolicySignature, write_signature
@@ -63,5 +65,5 @@ def test_more_steps_continues_the_committed_policies_and_refuses_a_baseline(tmp_
     result = CliRunner().invoke(app, ["policy", "train", "--profile", "tiny", "--variant", "baseline_img",
                                       "--more-steps", "10"])
     assert result.exit_code != 0 and "--more-steps: baseline_img is a baseline" in result.output
-    result = CliRunner().invoke(app, ["policy", "train", "--profile", "tiny", "--variant", "lnet", "--more-steps", "0"])
-    assert result.exit_code != 0 and "--more-steps: 0 is not a number of steps" in result.output
+    with pytest.raises(ConfigError, match="--more-steps: 0 is not a number of steps"):
+        training_plan(profile, VARIANTS["lnet"], ("pick",), tmp_path / "own", tmp_path / "main", more_steps=0)
