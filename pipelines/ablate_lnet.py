@@ -47,8 +47,10 @@ def run(profile: Profile, study: str, steps: int, episodes: int, pretrain_steps:
         out = ABLATION / study / name
         summary = train(config, params, paths.LEROBOT / "train", paths.LEROBOT / "validation", out, version, device)
         model = load_lnet(out / BEST, device, signature(config, version, summary["image_size"]), calibrated=False).model
-        model.use_tracking(TrackingSettings(data_association=profile.lnet.data_association
-                                            and config.tracker == "filter", gate=profile.lnet.gate))
+        filtering = config.tracker == "filter"
+        model.use_tracking(TrackingSettings(data_association=profile.lnet.data_association and filtering,
+                                            gate=profile.lnet.gate,
+                                            negative_information=profile.lnet.negative_information and filtering))
         _, calibration, _, _ = calibrate(model, frame_estimates(model, paths.LEROBOT / "validation", episodes, device),
                                          settings=chosen_calibration(profile.lnet.chosen_settings()).stated)
         test = predict(model, paths.LEROBOT / "test", episodes, device)

@@ -49,7 +49,8 @@ def _calibrate(profile: Profile) -> dict[str, Any]:
     settings = chosen_calibration(profile.lnet.chosen_settings()).stated  # the stated belief's chosen settings
     fits = {}
     for rule in rules:
-        runner.model.use_tracking(TrackingSettings(data_association=rule, gate=profile.lnet.gate))
+        runner.model.use_tracking(TrackingSettings(data_association=rule, gate=profile.lnet.gate,
+                                                   negative_information=profile.lnet.negative_information))
         fits[rule] = calibrate(runner.model, episodes, criterion, arena if lost else None, settings)
     predictions, calibration, tried, inputs = fits[chosen]
     check_scales(calibration, paths.LNET_CALIBRATION)

@@ -169,22 +169,38 @@ def eval_probe_pick(
     episodes: Annotated[int, typer.Option(min=1, help="Pick episodes to play.")] = 100,
     seed: Annotated[int, typer.Option(min=0, help="Reset seed of the first episode (then +1 each).")] = 1000,
     out: Annotated[Path | None, typer.Option(help="JSON to write (default: cards/results/pick_probe/<variant>"
-                                                   ".seed_<S>.json).")] = None,
+                                                   ".seed_<S>[.negative_information].json).")] = None,
+    negative_information: Annotated[bool, typer.Option(
+        help="Track with the filter's negative information (mor.lnet.unseen) switched on for this probe, over the "
+             "calibration fitted without it: a first look at the rule, not a row.")] = False,
+    against: Annotated[Path | None, typer.Option(
+        help="Another probe's JSON on the same episodes: this probe's success minus its, per episode, with a 95% "
+             "interval and its verdict.")] = None,
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
     """Where a Pick skill goes wrong: per step, whether the target (or another object) was within PICK's reach, in
     view, or out of view, and the skill's PICK probability there (mor.eval.pick_probe)."""
-    from pipelines.evaluate import pick_probe  # noqa: PLC0415
+    from mor.eval.stats import paired_difference  # noqa: PLC0415
+    from pipelines.evaluate import pick_probe, read_probe  # noqa: PLC0415
     from pipelines.io import write_json  # noqa: PLC0415
 
-    result = pick_probe(load_profile(profile, params), _variant(variant).name, training_seed, episodes, seed)
+    baseline = None if against is None else read_probe(against, episodes, seed)
+    result = pick_probe(load_profile(profile, params), _variant(variant).name, training_seed, episodes, seed,
+                        negative_information)
     typer.echo(f"success {result['success']:.3f}, target ever in reach {result['target_ever_in_reach']:.3f}, "
                f"median closest approach {result['median_closest_m']:.2f} m")
     for name, probability in result["pick_probability"].items():
         typer.echo(f"  {name}: {result['steps'][name]} steps, mean P(PICK) "
                    + ("-" if probability is None else f"{probability:.4f}"))
-    path = out or paths.RESULTS_CARD / "pick_probe" / f"{variant}.seed_{training_seed}.json"
+    if baseline is not None:
+        difference = paired_difference(result["outcomes"], baseline["outcomes"])
+        result["against"] = {"file": str(against), "success": baseline["success"], "difference": difference}
+        low, high = difference["ci95"]
+        typer.echo(f"success minus {against}'s ({baseline['success']:.3f}), per episode: {difference['mean']:+.3f} "
+                   f"[{low:+.3f}, {high:+.3f}] {difference['verdict']}")
+    rule = ".negative_information" if negative_information else ""
+    path = out or paths.RESULTS_CARD / "pick_probe" / f"{variant}.seed_{training_seed}{rule}.json"
     typer.echo(f"wrote {write_json(path, result)}")
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import asdict, replace
 from collections.abc import Iterator
 from functools import cache
 from pathlib import Path
@@ -104,9 +105,11 @@ def policy_video(profile: Profile, method_name: str, seed: int, out: Path) -> di
                               seed, horizon=profile.evaluate.horizon)
 
 
-def pick_probe(profile: Profile, variant_name: str, training_seed: int, episodes: int, seed: int) -> dict[str, Any]:
+def pick_probe(profile: Profile, variant_name: str, training_seed: int, episodes: int, seed: int,
+               negative_information: bool = False) -> dict[str, Any]:
     """``mor.eval.pick_probe.probe_pick`` of the committed Pick skill that ``variant_name`` plays (its run with
-    ``training_seed``), in a Pick env with that skill's observation."""
+    ``training_seed``), in a Pick env with that skill's observation; ``negative_information``: its L-Net tracks
+    with that rule on (``mor.lnet.unseen``), whatever its calibration was fitted with."""
     from mor.eval.pick_probe import probe_pick  # noqa: PLC0415
     from mor.policy.baselines import BaselineObservation  # noqa: PLC0415
     from mor.policy.envs import make_policy_env, make_task_env  # noqa: PLC0415
@@ -120,6 +123,10 @@ def pick_probe(profile: Profile, variant_name: str, training_seed: int, episodes
                          tasks=("pick",))
     sim = sim_of(method, profile.sim)
     variant = method.skill_owners()["pick"]
+    if negative_information:
+        if loaded.lnet is None or loaded.lnet.config.tracker != "filter":
+            raise ConfigError(f"--negative-information: {variant_name!r} does not track with the L-Net's filter")
+        loaded.lnet.model.use_tracking(replace(loaded.lnet.model.tracking, negative_information=True))
     if variant.is_baseline:
         env = BaselineObservation(make_task_env("pick", sim, render_frames=True), variant.baseline_input)
     else:
@@ -130,7 +137,25 @@ def pick_probe(profile: Profile, variant_name: str, training_seed: int, episodes
     finally:
         env.close()
     return {"variant": variant_name, "pick_from": variant.name, "training_seed": training_seed,
-            "policy": loaded.played_by()["policies"]["pick"], **result}
+            "policy": loaded.played_by()["policies"]["pick"],
+            "tracking": None if loaded.lnet is None else asdict(loaded.lnet.model.tracking), **result}
+
+
+def read_probe(path: Path, episodes: int, seed: int) -> dict[str, Any]:
+    """A probe JSON (``mor eval probe-pick``) to compare against: one clear error unless it played the same
+    ``episodes`` from reset seed ``seed`` and holds each episode's outcome."""
+    try:
+        probe = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as error:
+        raise ConfigError(f"--against: {path}: not a readable probe JSON ({error}); write one with mor eval "
+                          "probe-pick --out") from None
+    if not isinstance(probe, dict):
+        probe = {}
+    played = (probe.get("episodes"), probe.get("seed"), len(probe.get("outcomes") or []))
+    if played != (episodes, seed, episodes):
+        raise ConfigError(f"--against: {path} did not play these episodes ({episodes} from reset seed {seed}, each "
+                          "outcome recorded); probe it again with the same --episodes and --seed")
+    return probe
 
 
 def collect_results(profile_name: str) -> Path:

@@ -204,6 +204,10 @@ def test_baseline_stages_train_evaluate_and_fill_table_1(workspace: Path) -> Non
     probed = _run("eval", "probe-pick", "--variant", "baseline_landmark", "--episodes", "2", "--profile", "tiny")
     probe = json.loads((workspace / "cards/results/pick_probe/baseline_landmark.seed_0.json").read_text())
     assert probe["pick_from"] == "baseline_img" and probe["episodes"] == 2 and "mean P(PICK)" in probed
+    refused = CliRunner().invoke(app, ["eval", "probe-pick", "--variant", "baseline_landmark", "--negative-information",
+                                       "--profile", "tiny"])
+    assert refused.exit_code == 2 and refused.output.strip().splitlines() == [
+        "error: --negative-information: 'baseline_landmark' does not track with the L-Net's filter"]
     _run("eval", "run", "--method", "baseline_landmark", "--profile", "tiny")
     protocol = tiny["evaluate"]
     records = (workspace / "datasets/eval/baseline_landmark.jsonl").read_text().splitlines()

@@ -43,8 +43,8 @@ def _batch(observation: Any) -> Any:
 def probe_pick(env: gym.Env, skill: Skill, episodes: int, seed: int) -> dict[str, Any]:
     """Play ``episodes`` Pick episodes (reset seeds ``seed``, ``seed`` + 1, ...) of ``skill`` in ``env`` (a Pick
     env with the skill's observation and ``action_masks()``). Returns the success rate, the share of episodes in
-    which the target was ever within reach, the median closest approach to the target (m), and per step class its
-    steps and the mean probability of PICK there."""
+    which the target was ever within reach, the median closest approach to the target (m), per step class its
+    steps and the mean probability of PICK there, and each episode's success (``outcomes``, 0 or 1)."""
     successes, reached, closest = [], [], []
     pick: dict[str, list[float]] = {name: [] for name in STEP_CLASSES}
     for episode in range(episodes):
@@ -68,4 +68,5 @@ def probe_pick(env: gym.Env, skill: Skill, episodes: int, seed: int) -> dict[str
     return {"episodes": episodes, "seed": seed, "success": float(np.mean(successes)),
             "target_ever_in_reach": float(np.mean(reached)), "median_closest_m": float(np.median(closest)),
             "steps": {name: len(values) for name, values in pick.items()},
-            "pick_probability": {name: float(np.mean(values)) if values else None for name, values in pick.items()}}
+            "pick_probability": {name: float(np.mean(values)) if values else None for name, values in pick.items()},
+            "outcomes": [int(s) for s in successes]}

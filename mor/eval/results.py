@@ -14,7 +14,7 @@ from mor.eval.methods import (NEAREST_RULE_VARIANTS, RULE_SUFFIX, method_spec, p
                               policy_root)
 from mor.eval.failures import sum_endings
 from mor.eval.paper import LOWER_IS_BETTER
-from mor.eval.stats import probability_of_improvement, summarize_runs
+from mor.eval.stats import probability_of_improvement, summarize_runs, verdict
 from mor.policy.variants import OURS, VARIANTS
 from mor.policy.workspace import Workspace
 
@@ -161,7 +161,6 @@ def compare(row_a: dict[str, Any], row_b: dict[str, Any], resamples: int = 10_00
         summary_b, dist_b = summarize_runs(runs_b, resamples, seed=2)
         low, high = (float(x) for x in np.percentile(dist_a - dist_b, [2.5, 97.5]))
         sign = -1.0 if metric in LOWER_IS_BETTER else 1.0
-        better, worse = (low > 0, high < 0) if sign > 0 else (high < 0, low > 0)
         found.append({
             "a": a, "b": b, "metric": metric, "training_seeds": {a: row_a.get("training_seeds"),
                                                                  b: row_b.get("training_seeds")},
@@ -169,7 +168,7 @@ def compare(row_a: dict[str, Any], row_b: dict[str, Any], resamples: int = 10_00
             "difference": {"mean": summary_a["mean"] - summary_b["mean"], "ci95": [low, high]},
             "probability_of_improvement": probability_of_improvement(
                 *(([np.concatenate(list(run.values())) * sign for run in runs]) for runs in (runs_a, runs_b))),
-            "verdict": "helps" if better else "hurts" if worse else "no evidence"})
+            "verdict": verdict(low, high, metric in LOWER_IS_BETTER)})
     return found
 
 

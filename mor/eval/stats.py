@@ -31,6 +31,22 @@ def summarize(values_by_seed: Mapping[int, Sequence[float]], resamples: int = 10
             "seed_means": {str(k): v for k, v in seed_means.items()}}
 
 
+def verdict(low: float, high: float, lower_is_better: bool = False) -> str:
+    """What a 95% interval [low, high] of a difference a - b says: ``helps`` (a better: the interval above 0, below 0
+    where lower is better), ``hurts`` (the other way) or ``no evidence``."""
+    better, worse = (high < 0, low > 0) if lower_is_better else (low > 0, high < 0)
+    return "helps" if better else "hurts" if worse else "no evidence"
+
+
+def paired_difference(a: Sequence[float], b: Sequence[float], resamples: int = 10_000) -> dict:
+    """Per-episode values of two methods on the same episodes -> {"mean", "ci95", "verdict"} of a - b, the interval
+    a BCa bootstrap over the episodes' differences."""
+    if len(a) != len(b):
+        raise ValueError(f"paired_difference: {len(a)} episodes against {len(b)}")
+    summary = summarize({0: np.asarray(a, float) - np.asarray(b, float)}, resamples)
+    return {"mean": summary["mean"], "ci95": summary["ci95"], "verdict": verdict(*summary["ci95"])}
+
+
 def _run_bootstrap(values_by_seed: Mapping[str, Sequence[float]], resamples: int, rng: np.random.Generator
                    ) -> np.ndarray:
     """(resamples,) means of one run's episodes, each resampled with replacement within its evaluation seed."""

@@ -3,7 +3,8 @@ validation (``mor.lnet.calibration_fit``), read by whoever loads the checkpoint 
 
 It holds three records, as flat JSON fields: the scales of the stated uncertainty (``mor.lnet.calibration``:
 ``agent_scale``, ``object_scale``, ``kappa_scale``, ``shared_colour_scale``), the tracking settings they were fitted
-with (``mor.lnet.filter.TrackingSettings``: ``data_association``, ``noise_own``, ``noise_shared``, ``gate``) and
+with (``mor.lnet.filter.TrackingSettings``: ``data_association``, ``noise_own``, ``noise_shared``, ``gate``,
+``negative_information``) and
 the stated belief's parameters (``mor.lnet.stated.StatedParams``: ``lost_own``, ``lost_shared``, ``search_find``,
 and the chosen ``not_found_sigma``, ``search_max_looks``, ``arena_grid_spacing``). A file without some of them
 predates them and was fitted without them: they read as their defaults.
@@ -23,6 +24,8 @@ from mor.lnet.filter import TrackingSettings
 from mor.lnet.stated import StatedParams
 
 CALIBRATION_FILE = "calibration.json"
+#: the ``TrackingSettings`` fields a profile chooses (``lnet.<name>``) rather than the calibration fitting them
+TRACKING_CHOSEN: tuple[str, ...] = ("data_association", "gate", "negative_information")
 
 
 @dataclass(frozen=True)
@@ -43,10 +46,11 @@ class FittedCalibration:
 
 
 def recorded_settings(fitted: FittedCalibration) -> dict[str, Any]:
-    """The tracking-time settings a run chooses in its profile (``LNetParams.chosen_settings``: the tracking rule,
+    """The tracking-time settings a run chooses in its profile (``LNetParams.chosen_settings``: the tracking rules,
     the filter's gate, and the stated belief's ``StatedParams.CHOSEN``: the not-found width, the search belief's
     look cap, the arena grid's spacing) that ``fitted`` was fitted with."""
     return {"data_association": fitted.tracking.data_association, "gate": fitted.tracking.gate,
+            "negative_information": fitted.tracking.negative_information,
             **{name: getattr(fitted.stated, name) for name in StatedParams.CHOSEN}}
 
 
@@ -57,7 +61,7 @@ def chosen_calibration(chosen: dict[str, Any], tracking: TrackingSettings | None
     calibrate-lnet's fit."""
     tracking, stated = tracking or TrackingSettings(), stated or StatedParams()
     return FittedCalibration(
-        tracking=replace(tracking, **{key: chosen[key] for key in ("data_association", "gate") if key in chosen}),
+        tracking=replace(tracking, **{key: chosen[key] for key in TRACKING_CHOSEN if key in chosen}),
         stated=replace(stated, **{key: chosen[key] for key in StatedParams.CHOSEN if key in chosen}))
 
 
@@ -68,17 +72,19 @@ def _optional(value: Any) -> float | None:
 def calibration_from_values(values: dict[str, Any]) -> FittedCalibration:
     """The ``FittedCalibration`` a ``calibration.json`` (or one of its ``criteria``) records; ValueError, KeyError
     or TypeError where a field is missing or of the wrong kind."""
-    data_association = values.get("data_association", False)
-    if not isinstance(data_association, bool):
-        raise TypeError(f"data_association must be true or false, got {data_association!r}")
+    rules = {rule: values.get(rule, False) for rule in ("data_association", "negative_information")}
+    for rule, value in rules.items():
+        if not isinstance(value, bool):
+            raise TypeError(f"{rule} must be true or false, got {value!r}")
     max_looks = values.get("search_max_looks", StatedParams.search_max_looks)
     if isinstance(max_looks, bool) or not isinstance(max_looks, int):
         raise TypeError(f"search_max_looks must be an integer, got {max_looks!r}")
     return FittedCalibration(
         Calibration(*(float(values[key]) for key in ("agent_scale", "object_scale", "kappa_scale")),
                     shared_colour_scale=_optional(values.get("shared_colour_scale"))),
-        TrackingSettings(data_association, float(values.get("noise_own", 1.0)),
-                         float(values.get("noise_shared", 1.0)), float(values.get("gate", TrackingSettings.gate))),
+        TrackingSettings(rules["data_association"], float(values.get("noise_own", 1.0)),
+                         float(values.get("noise_shared", 1.0)), float(values.get("gate", TrackingSettings.gate)),
+                         rules["negative_information"]),
         StatedParams(float(values.get("lost_own", 0.0)), _optional(values.get("lost_shared")),
                      _optional(values.get("search_find")),
                      float(values.get("not_found_sigma", StatedParams.not_found_sigma)),

@@ -23,6 +23,10 @@ covariance for objects of a colour of their own and for objects that share their
 that a same-coloured object is in the episode; nearly all the badly wrong beliefs are of such objects, while the
 measurements of the others deserve more trust than the one learned scale gives (docs/assumptions.md).
 
+``TrackingSettings.negative_information`` (a tracking-time rule, off in training and by default;
+``lnet.negative_information``, recorded in ``calibration.json``): a frame that does not see an object is evidence
+against the part of its belief in the camera's view (``mor.lnet.unseen``).
+
 Shapes: B episodes, K object slots. Positions in metres, headings in radians; the heading's belief is a Gaussian
 (mean, variance) on the circle, reported as a von Mises with kappa = 1 / variance.
 """
@@ -36,10 +40,11 @@ import torch
 from torch import nn
 
 from mor.lnet.likelihoods import MIN_KAPPA
+from mor.lnet.small_matrices import EPS, eye_like, outer, symmetric, wrap
+from mor.lnet.unseen import not_seen_update
 from mor.sim.rules import DROP_DISTANCE, N_ACTIONS
 
 _GATE_SHARPNESS = 2.0
-_EPS = 1e-6
 _MAX_LOG_RATIO = 60.0  # exp(60) ~ 1e26: a claim this much better takes the measurement whole
 _LOG_PRIOR_STD = math.log(6.0 / math.sqrt(12.0))  # a uniform 6 m side: std 1.73 m (learned from there)
 
@@ -53,46 +58,24 @@ class TrackingSettings:
     """How the filter tracks, chosen by whoever runs it (module docstring), not weights: ``data_association`` the
     rule; ``noise_own`` and ``noise_shared`` the multipliers (> 0) of the object measurement covariance for objects
     of a colour of their own and for objects sharing their colour; ``gate`` the squared Mahalanobis distance of an
-    innovation beyond which a measurement is gated out (default: chi-square, 2 dof, 99%; ``lnet.gate``).
-    ``calibration.json`` records the settings its scales were fitted with (``mor.lnet.calibration_file``);
+    innovation beyond which a measurement is gated out (default: chi-square, 2 dof, 99%; ``lnet.gate``);
+    ``negative_information`` whether a frame that does not see an object moves its belief out of the camera's view
+    (``mor.lnet.unseen``; ``lnet.negative_information``). ``calibration.json`` records the settings its scales
+    were fitted with (``mor.lnet.calibration_file``);
     ``LNet.use_tracking`` applies them. The LSTM tracker has none: only the defaults."""
 
     data_association: bool = False
     noise_own: float = 1.0
     noise_shared: float = 1.0
     gate: float = 9.21
-
-
-def _eye(like: torch.Tensor) -> torch.Tensor:
-    return torch.eye(2, dtype=like.dtype, device=like.device)
+    negative_information: bool = False
 
 
 def _inverse(matrix: torch.Tensor) -> torch.Tensor:
     """Inverse of symmetric positive 2x2 matrices (..., 2, 2), written out."""
     a, b, c, d = matrix[..., 0, 0], matrix[..., 0, 1], matrix[..., 1, 0], matrix[..., 1, 1]
-    det = (a * d - b * c).clamp(min=_EPS * _EPS)
+    det = (a * d - b * c).clamp(min=EPS * EPS)
     return torch.stack([torch.stack([d, -b], -1), torch.stack([-c, a], -1)], -2) / det[..., None, None]
-
-
-def cholesky_2x2(cov: torch.Tensor) -> torch.Tensor:
-    """Lower Cholesky factors of covariances (..., 2, 2), written out (batched LAPACK on 2x2 is slow on CPU)."""
-    a = torch.sqrt(cov[..., 0, 0].clamp(min=_EPS))
-    c = cov[..., 1, 0] / a
-    b = torch.sqrt((cov[..., 1, 1] - c * c).clamp(min=_EPS))
-    zero = torch.zeros_like(a)
-    return torch.stack([torch.stack([a, zero], -1), torch.stack([c, b], -1)], -2)
-
-
-def _outer(v: torch.Tensor) -> torch.Tensor:
-    return v.unsqueeze(-1) * v.unsqueeze(-2)
-
-
-def _symmetric(cov: torch.Tensor) -> torch.Tensor:
-    return 0.5 * (cov + cov.transpose(-1, -2)) + _EPS * _eye(cov)
-
-
-def _wrap(angle: torch.Tensor) -> torch.Tensor:
-    return torch.atan2(torch.sin(angle), torch.cos(angle))
 
 
 def _squared_mahalanobis(difference: torch.Tensor, inverse: torch.Tensor) -> torch.Tensor:
@@ -117,17 +100,17 @@ def _kalman(mean: torch.Tensor, cov: torch.Tensor, z: torch.Tensor, noise: torch
         weight = kept if weight is None else kept * weight
     full_step = (gain @ innovation.unsqueeze(-1))[..., 0]
     if weight is None:
-        return mean + full_step, _symmetric(cov - gain @ cov)
+        return mean + full_step, symmetric(cov - gain @ cov)
     cov = cov - weight[..., None, None] * gain @ cov
     if spread:
-        cov = cov + (weight * (1.0 - weight))[..., None, None] * _outer(full_step)
-    return mean + weight[..., None] * full_step, _symmetric(cov)
+        cov = cov + (weight * (1.0 - weight))[..., None, None] * outer(full_step)
+    return mean + weight[..., None] * full_step, symmetric(cov)
 
 
 def _log_density(x: torch.Tensor, mean: torch.Tensor, cov: torch.Tensor) -> torch.Tensor:
     """log N(x; mean, cov) of 2-D points (..., 2) under covariances (..., 2, 2)."""
     d2 = _squared_mahalanobis(x - mean, _inverse(cov))
-    det = (cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]).clamp(min=_EPS * _EPS)
+    det = (cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]).clamp(min=EPS * EPS)
     return -0.5 * d2 - 0.5 * torch.log(det) - math.log(2.0 * math.pi)
 
 
@@ -193,17 +176,17 @@ class BeliefFilter(nn.Module):
         the action before this frame, -1 none; shared (B, K) bool, the object shares its colour with another
         (which measurement-noise multiplier of ``tracking`` it gets; None: all of their own colour)."""
         agent, agent_cov, heading, heading_var, objects, object_cov, previous_held = state
-        eye = _eye(agent)
+        eye = eye_like(agent)
         # 1. Motion: the previous action's learned displacement and turn, and their learned noise.
         action = torch.where(previous_action >= 0, previous_action, torch.full_like(previous_action, N_ACTIONS))
         distance, turn = self.forward_distance[action], self.turn[action]
         direction = torch.stack([torch.cos(heading), torch.sin(heading)], -1)
         normal = torch.stack([-torch.sin(heading), torch.cos(heading)], -1)
         agent = agent + distance[:, None] * direction
-        agent_cov = (agent_cov + (distance ** 2 * heading_var)[:, None, None] * _outer(normal)
-                     + torch.exp(2 * self.log_forward_std[action])[:, None, None] * _outer(direction)
+        agent_cov = (agent_cov + (distance ** 2 * heading_var)[:, None, None] * outer(normal)
+                     + torch.exp(2 * self.log_forward_std[action])[:, None, None] * outer(direction)
                      + torch.exp(2 * self.log_agent_std) * eye)
-        heading = _wrap(heading + turn)
+        heading = wrap(heading + turn)
         heading_var = heading_var + torch.exp(2 * self.log_turn_std[action])
         # 2. The PoseNet's global fix.
         fix_mean, fix_tril, fix_heading, fix_kappa = agent_fix
@@ -211,7 +194,7 @@ class BeliefFilter(nn.Module):
         agent, agent_cov = _kalman(agent, agent_cov, fix_mean, scale[0] * fix_tril @ fix_tril.transpose(-1, -2))
         fix_var = scale[1] / fix_kappa.clamp(min=MIN_KAPPA)
         gain = heading_var / (heading_var + fix_var)
-        heading = _wrap(heading + gain * _wrap(fix_heading - heading))
+        heading = wrap(heading + gain * wrap(fix_heading - heading))
         heading_var = (1.0 - gain) * heading_var
         # 3. Objects on the floor drift a little; the held one is where the agent is; a released one lands ahead.
         slots = torch.arange(self.n_slots, device=held.device)
@@ -221,7 +204,7 @@ class BeliefFilter(nn.Module):
         direction = torch.stack([torch.cos(heading), torch.sin(heading)], -1)
         normal = torch.stack([-torch.sin(heading), torch.cos(heading)], -1)
         landing = agent + DROP_DISTANCE * direction
-        landing_cov = (agent_cov + (DROP_DISTANCE ** 2 * heading_var)[:, None, None] * _outer(normal)
+        landing_cov = (agent_cov + (DROP_DISTANCE ** 2 * heading_var)[:, None, None] * outer(normal)
                        + torch.exp(2 * self.log_drop_std) * eye)
         objects = torch.where(is_held[..., None], agent[:, None], torch.where(dropped[..., None], landing[:, None],
                                                                                objects))
@@ -242,10 +225,13 @@ class BeliefFilter(nn.Module):
                 multiplier = torch.where(shared, common, multiplier)
             ego_cov = ego_cov * multiplier[..., None, None]
         noise = (scale[2] * rotation @ ego_cov @ rotation.transpose(-1, -2) + agent_cov[:, None]
-                 + heading_var[:, None, None, None] * _outer(jacobian))
+                 + heading_var[:, None, None, None] * outer(jacobian))
         weight = (~is_held).to(objects.dtype) if visibility is None else visibility * ~is_held
         if self.tracking.data_association:
             weight = associate(weight, measured, noise, objects, object_cov)
         objects, object_cov = _kalman(objects, object_cov, measured, noise, weight, gate=self.tracking.gate,
                                       spread=self.tracking.data_association)
+        # 5. What the frame did not see (``mor.lnet.unseen``).
+        if self.tracking.negative_information and visibility is not None:
+            objects, object_cov = not_seen_update(objects, object_cov, agent, heading, (1.0 - visibility) * ~is_held)
         return agent, agent_cov, heading, heading_var, objects, object_cov, held

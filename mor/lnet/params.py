@@ -104,6 +104,11 @@ class LNetParams(ParamsModel):
     gate: float = Field(9.21, gt=0, description="the filter's gate: the squared Mahalanobis distance of an "
                         "innovation beyond which an object measurement is dropped (9.21: chi-square, 2 dof, 99%); "
                         "a tracking-time setting, recorded by mor calibrate-lnet")
+    negative_information: bool = Field(False, description="track with the filter's negative information "
+                                       "(mor.lnet.unseen: a frame that does not see an object moves the part of its "
+                                       "belief in the camera's view within PICK's reach out of it, and a confident "
+                                       "belief that the frame contradicts widens); a tracking-time rule, not used in "
+                                       "training, recorded by mor calibrate-lnet")
     not_found_sigma: float = Field(1.0, gt=0, description="metres: a belief wider than this (geometric mean of its "
                                    "standard deviations, uncalibrated) has not found its object, and its stated "
                                    "belief is the search belief (mor.lnet.stated); recorded by mor calibrate-lnet")
@@ -119,12 +124,14 @@ class LNetParams(ParamsModel):
         """The tracking-time settings this profile chooses, which ``calibrate-lnet`` records and ``load_lnet`` checks
         against the calibration (``mor.lnet.calibration_file.recorded_settings``)."""
         return {"data_association": self.data_association, "gate": self.gate,
+                "negative_information": self.negative_information,
                 **{name: getattr(self, name) for name in STATED_SETTINGS}}
 
     @model_validator(mode="after")
     def _association_needs_the_filter(self) -> LNetParams:
-        if self.data_association and self.model.tracker != "filter":
-            raise ValueError("data_association: needs model.tracker: filter (the LSTM keeps no per-object belief)")
+        for rule in ("data_association", "negative_information"):
+            if getattr(self, rule) and self.model.tracker != "filter":
+                raise ValueError(f"{rule}: needs model.tracker: filter (the LSTM keeps no per-object belief)")
         return self
 
 

@@ -216,6 +216,8 @@ def lnet_identity(dataset_version: str, checkpoint_digest: str | None, fitted: F
         hashed = {**asdict(fitted.scales), **asdict(fitted.tracking), "lost_own": 0.0, "lost_shared": None}
         if fitted.tracking.gate == TrackingSettings.gate:  # the gate joined the record later, at its default
             del hashed["gate"]
+        if not fitted.tracking.negative_information:  # so did negative information, off
+            del hashed["negative_information"]
         identity += "-cal" + hashlib.sha256(json.dumps(hashed, sort_keys=True).encode()).hexdigest()[:8]
     return identity + ("-bf16" if encoder_precision == "bfloat16" else "")
 

@@ -8,7 +8,8 @@ import math
 import pytest
 import torch
 
-from mor.lnet.filter import BeliefFilter, TrackingSettings, associate, cholesky_2x2
+from mor.lnet.filter import BeliefFilter, TrackingSettings, associate
+from mor.lnet.small_matrices import cholesky_2x2
 from mor.sim.rules import DROP_DISTANCE
 
 TIGHT = 1e-3  # metres: a near-exact measurement

@@ -188,11 +188,16 @@ def test_a_bfloat16_encoder_moves_the_estimates_by_centimetres_and_is_another_id
         full.model.use_encoder_precision("float16")
 
 
-def test_the_tracking_rule_follows_the_calibration_and_a_mismatch_is_one_clear_error(tmp_path: Path) -> None:
+def _filter_checkpoint(tmp_path: Path) -> tuple[LNetConfig, Path, dict[str, object]]:
+    """A small filter L-Net saved in ``tmp_path`` (its config, its checkpoint) and identity calibration scales."""
     config = SMALL.model_copy(update={"tracker": "filter", "visibility": True})
     checkpoint = tmp_path / "model.pt"
     torch.save({**signature(config, "v", SIZE), "model": LNet(config).state_dict()}, checkpoint)
-    scales = {"agent_scale": 1, "object_scale": 1, "kappa_scale": 1, "dataset_version": "v"}
+    return config, checkpoint, {"agent_scale": 1, "object_scale": 1, "kappa_scale": 1, "dataset_version": "v"}
+
+
+def test_the_tracking_rule_follows_the_calibration_and_a_mismatch_is_one_clear_error(tmp_path: Path) -> None:
+    config, checkpoint, scales = _filter_checkpoint(tmp_path)
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True}))
     runner = load_lnet(checkpoint)
     assert runner.model.tracking.data_association and "-cal" in runner.identity
@@ -256,6 +261,27 @@ def test_the_tracking_rule_follows_the_calibration_and_a_mismatch_is_one_clear_e
     (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "object_scale": float("nan")}))
     with pytest.raises(MorError, match="scales must be positive and finite"):
         load_lnet(checkpoint)
+
+
+def test_negative_information_is_recorded_checked_and_another_identity_only_when_on(tmp_path: Path) -> None:
+    _, checkpoint, scales = _filter_checkpoint(tmp_path)
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True}))
+    before = load_lnet(checkpoint)  # a file from before the rule: fitted without it
+    assert not before.model.tracking.negative_information
+    with pytest.raises(MorError, match="fitted with negative_information False but this run's is True"):
+        load_lnet(checkpoint, chosen={"negative_information": True})
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True,
+                                                         "negative_information": False}))
+    assert load_lnet(checkpoint).identity == before.identity
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "data_association": True,
+                                                         "negative_information": True}))
+    on = load_lnet(checkpoint, chosen={"negative_information": True})
+    assert on.model.tracking.negative_information and on.identity != before.identity
+    (tmp_path / CALIBRATION_FILE).write_text(json.dumps({**scales, "negative_information": 1}))
+    with pytest.raises(MorError, match="negative_information must be true or false"):
+        load_lnet(checkpoint)
+    with pytest.raises(ValueError, match="negative_information: needs model.tracker: filter"):
+        LNetParams(model=SMALL.model_copy(update={"tracker": "lstm"}), negative_information=True)
 
 
 def test_tracking_settings_other_than_the_defaults_need_the_filter_tracker() -> None:
