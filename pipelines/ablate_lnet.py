@@ -39,7 +39,8 @@ def run(profile: Profile, study: str, steps: int, episodes: int, pretrain_steps:
     pretrain = profile.lnet.train.pretrain_steps if pretrain_steps is None else pretrain_steps
     base = profile.lnet.train.model_copy(update={"max_steps": steps, "pretrain_steps": pretrain, "patience": 10**6})
     results: dict[str, Any] = {"study": study, "steps": steps, "pretrain_steps": pretrain, "test_episodes": episodes, "dataset_version": version,
-                               "data_association": profile.lnet.data_association}
+                               "data_association": profile.lnet.data_association,
+                               "negative_information": profile.lnet.negative_information}
     for name, overrides in ABLATIONS[study].items():
         params = base.model_copy(update={k: v for k, v in overrides.items() if k in TrainParams.model_fields})
         config = profile.lnet.model.model_copy(update={k: v for k, v in overrides.items()
@@ -50,7 +51,8 @@ def run(profile: Profile, study: str, steps: int, episodes: int, pretrain_steps:
         filtering = config.tracker == "filter"
         model.use_tracking(TrackingSettings(data_association=profile.lnet.data_association and filtering,
                                             gate=profile.lnet.gate,
-                                            negative_information=profile.lnet.negative_information and filtering))
+                                            negative_information=profile.lnet.negative_information and filtering
+                                            and config.visibility))
         _, calibration, _, _ = calibrate(model, frame_estimates(model, paths.LEROBOT / "validation", episodes, device),
                                          settings=chosen_calibration(profile.lnet.chosen_settings()).stated)
         test = predict(model, paths.LEROBOT / "test", episodes, device)

@@ -21,11 +21,12 @@ from typing import Any
 from mor.errors import MorError
 from mor.lnet.calibration import Calibration
 from mor.lnet.filter import TrackingSettings
+from mor.lnet.params import TRACKING_RULES
 from mor.lnet.stated import StatedParams
 
 CALIBRATION_FILE = "calibration.json"
 #: the ``TrackingSettings`` fields a profile chooses (``lnet.<name>``) rather than the calibration fitting them
-TRACKING_CHOSEN: tuple[str, ...] = ("data_association", "gate", "negative_information")
+TRACKING_CHOSEN: tuple[str, ...] = (*TRACKING_RULES, "gate")
 
 
 @dataclass(frozen=True)
@@ -49,8 +50,7 @@ def recorded_settings(fitted: FittedCalibration) -> dict[str, Any]:
     """The tracking-time settings a run chooses in its profile (``LNetParams.chosen_settings``: the tracking rules,
     the filter's gate, and the stated belief's ``StatedParams.CHOSEN``: the not-found width, the search belief's
     look cap, the arena grid's spacing) that ``fitted`` was fitted with."""
-    return {"data_association": fitted.tracking.data_association, "gate": fitted.tracking.gate,
-            "negative_information": fitted.tracking.negative_information,
+    return {**{name: getattr(fitted.tracking, name) for name in TRACKING_CHOSEN},
             **{name: getattr(fitted.stated, name) for name in StatedParams.CHOSEN}}
 
 
@@ -72,7 +72,7 @@ def _optional(value: Any) -> float | None:
 def calibration_from_values(values: dict[str, Any]) -> FittedCalibration:
     """The ``FittedCalibration`` a ``calibration.json`` (or one of its ``criteria``) records; ValueError, KeyError
     or TypeError where a field is missing or of the wrong kind."""
-    rules = {rule: values.get(rule, False) for rule in ("data_association", "negative_information")}
+    rules = {rule: values.get(rule, False) for rule in TRACKING_RULES}
     for rule, value in rules.items():
         if not isinstance(value, bool):
             raise TypeError(f"{rule} must be true or false, got {value!r}")

@@ -330,7 +330,9 @@ def render_model_card(metrics: dict[str, Any], params: dict[str, Any], calibrati
                   "", *precision_table(metrics["encoder_precision"]), ""]
     if ablation:
         rule = ("the filter variants tracked with data association" if ablation.get("data_association") else
-                "tracked without data association")
+                "tracked without data association") + (
+                    " and with negative information where they read visibility"
+                    if ablation.get("negative_information") else "")
         pretrain = f"{ablation['pretrain_steps']} PoseNet + " if "pretrain_steps" in ablation else ""
         lines += [f"## Ablation: tracker and visibility loss at an equal budget ({pretrain}{ablation['steps']} "
                   "window steps each, "

@@ -12,10 +12,10 @@ from torch import nn
 
 from mor.data.schema import MAX_OBJECTS
 from mor.lnet.filter import BeliefFilter, TrackingSettings
-from mor.lnet.small_matrices import cholesky_2x2
 from mor.lnet.frames import ego_to_world
 from mor.lnet.likelihoods import MIN_KAPPA, positive, scale_tril
 from mor.lnet.params import LNetConfig
+from mor.lnet.small_matrices import cholesky_2x2
 from mor.sim.catalog import N_CLASSES, shares_colour
 from mor.sim.rules import N_ACTIONS
 

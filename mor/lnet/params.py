@@ -77,6 +77,8 @@ class CalibrationParams(ParamsModel):
         "anywhere in the arena: mor.lnet.lost); calibrate-lnet reports every criterion with and without")
 
 
+#: the filter's tracking rules a profile switches on or off (``mor.lnet.filter.TrackingSettings``)
+TRACKING_RULES: tuple[str, ...] = ("data_association", "negative_information")
 #: the stated belief's settings a profile chooses rather than the calibration fitting them (``StatedParams.CHOSEN``)
 STATED_SETTINGS: tuple[str, ...] = ("not_found_sigma", "search_max_looks", "arena_grid_spacing")
 
@@ -105,10 +107,11 @@ class LNetParams(ParamsModel):
                         "innovation beyond which an object measurement is dropped (9.21: chi-square, 2 dof, 99%); "
                         "a tracking-time setting, recorded by mor calibrate-lnet")
     negative_information: bool = Field(False, description="track with the filter's negative information "
-                                       "(mor.lnet.unseen: a frame that does not see an object moves the part of its "
-                                       "belief in the camera's view within PICK's reach out of it, and a confident "
-                                       "belief that the frame contradicts widens); a tracking-time rule, not used in "
-                                       "training, recorded by mor calibrate-lnet")
+                                       "(mor.lnet.unseen: a frame whose PoseNet does not see an object down-weights "
+                                       "the part of its belief in the camera's view within PICK's reach, and a "
+                                       "confident belief that the frame contradicts widens); needs the visibility "
+                                       "head; a tracking-time rule, not used in training, recorded by mor "
+                                       "calibrate-lnet")
     not_found_sigma: float = Field(1.0, gt=0, description="metres: a belief wider than this (geometric mean of its "
                                    "standard deviations, uncalibrated) has not found its object, and its stated "
                                    "belief is the search belief (mor.lnet.stated); recorded by mor calibrate-lnet")
@@ -123,15 +126,17 @@ class LNetParams(ParamsModel):
     def chosen_settings(self) -> dict[str, Any]:
         """The tracking-time settings this profile chooses, which ``calibrate-lnet`` records and ``load_lnet`` checks
         against the calibration (``mor.lnet.calibration_file.recorded_settings``)."""
-        return {"data_association": self.data_association, "gate": self.gate,
-                "negative_information": self.negative_information,
+        return {**{rule: getattr(self, rule) for rule in TRACKING_RULES}, "gate": self.gate,
                 **{name: getattr(self, name) for name in STATED_SETTINGS}}
 
     @model_validator(mode="after")
-    def _association_needs_the_filter(self) -> LNetParams:
-        for rule in ("data_association", "negative_information"):
+    def _tracking_rules_need_the_filter(self) -> LNetParams:
+        for rule in TRACKING_RULES:
             if getattr(self, rule) and self.model.tracker != "filter":
                 raise ValueError(f"{rule}: needs model.tracker: filter (the LSTM keeps no per-object belief)")
+        if self.negative_information and not self.model.visibility:
+            raise ValueError("negative_information: needs model.visibility: true (it reads which objects the "
+                             "PoseNet does not see)")
         return self
 
 

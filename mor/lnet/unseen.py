@@ -4,15 +4,20 @@ The filter's Kalman update learns from measurements only: a belief that puts an 
 stays there while the camera looks at the spot and sees nothing. Here a frame in which the PoseNet does not see
 slot k (probability ``missed_k = 1 - visibility_k``) is evidence against the part of k's belief that lies in the
 camera's view within ``UNSEEN_REACH`` metres (``mor.sim.rules.CAMERA_FOV``): a point x there would have been seen
-with probability ``UNSEEN_DETECTION``, so the frame's likelihood is ``L(x) = 1 - UNSEEN_DETECTION missed_k in_view(x)``
-(occlusion ignored: a hidden object costs its belief a little width).
+with probability ``UNSEEN_DETECTION``, so the frame's likelihood is
+``L(x) = 1 - UNSEEN_DETECTION missed_k in_view_within_reach(x)`` (occlusion ignored: a hidden object costs its belief
+a little width; the agent's pose is taken at its mean). It follows the filter's soft Kalman update of the same
+frame, which weights the measurement by ``visibility_k``.
 
-A confident belief that lies wholly in view is not moved by ``L`` alone (every point is scaled alike). So the belief
-is read as two hypotheses: it is right, or it is wrong by about ``UNSEEN_SPREAD`` metres (the same mean, the
-covariance widened by ``UNSEEN_SPREAD^2``), the latter with prior probability ``UNSEEN_DOUBT``. The frame moves
-probability to "wrong" by Bayes' rule; the share it moved, ``omega = (P(wrong | frame) - UNSEEN_DOUBT) /
-(1 - UNSEEN_DOUBT)``, mixes the two hypotheses, each times ``L``, and the mixture's mean and covariance are the new
-belief. Without evidence (nothing missed, or no belief in view) omega is 0 and the belief is unchanged.
+A belief partly in view moves away from the view. A confident belief that lies wholly in view is not moved by ``L``
+alone (every point is scaled alike), so the belief is read as two hypotheses: it is right, or it is wrong by about
+``UNSEEN_SPREAD`` metres (the same mean, the covariance widened by ``UNSEEN_SPREAD^2``), the latter with prior
+probability ``UNSEEN_DOUBT``. The frame moves probability to "wrong" by Bayes' rule, and the share it moved,
+``omega = (P(wrong | frame) - UNSEEN_DOUBT) / (1 - UNSEEN_DOUBT)`` (a heuristic weight, not the posterior itself:
+it is 0 where the frame says nothing), mixes the two hypotheses, each times ``L``; the mixture's mean and covariance
+are the new belief. So a contradicted confident belief widens about where it was, and the next frames, which see
+the view empty again, push its mass out of it. Without evidence (nothing missed, or no belief in view) omega is 0
+and the belief is unchanged.
 
 Moments under ``L`` are taken by a fixed 2-D Gauss-Hermite rule (``UNSEEN_NODES`` per axis), so the update is
 deterministic. A tracking-time rule (off in training), recorded by ``mor calibrate-lnet`` like the others.
@@ -52,12 +57,12 @@ _UNIT, _WEIGHTS = _quadrature()  # made once, float64 (torch.compile traces no N
 _HALF_FOV = float(CAMERA_FOV) / 2.0  # a Python float, for the same reason
 
 
-def in_view(points: torch.Tensor, agent: torch.Tensor, heading: torch.Tensor) -> torch.Tensor:
-    """Whether world points (B, ..., 2) lie in the camera's view within ``UNSEEN_REACH`` of agents at ``agent``
-    (B, 2) facing ``heading`` (B,): (B, ...) bool."""
+def in_view_within_reach(points: torch.Tensor, agent: torch.Tensor, heading: torch.Tensor) -> torch.Tensor:
+    """Whether world points (B, ..., 2) lie in the camera's view (``rules.CAMERA_FOV``, as ``mor.lnet.search.in_view``
+    in torch) within ``UNSEEN_REACH`` metres of agents at ``agent`` (B, 2) facing ``heading`` (B,): (B, ...) bool."""
     extra = (1,) * (points.dim() - 2)
-    delta = points - agent.view(agent.shape[0], *extra, 2)
-    theta = heading.view(-1, *extra)
+    delta = points - agent.reshape(agent.shape[0], *extra, 2)
+    theta = heading.reshape(-1, *extra)
     bearing = wrap(torch.atan2(delta[..., 1], delta[..., 0]) - theta)
     return (torch.linalg.vector_norm(delta, dim=-1) <= UNSEEN_REACH) & (bearing.abs() <= _HALF_FOV)
 
@@ -65,9 +70,10 @@ def in_view(points: torch.Tensor, agent: torch.Tensor, heading: torch.Tensor) ->
 def _weighted_moments(mean: torch.Tensor, cov: torch.Tensor, agent: torch.Tensor, heading: torch.Tensor,
                       missed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """N(mean (B, K, 2), cov (B, K, 2, 2)) times ``L`` -> (its mass (B, K) in (0, 1], mean, covariance)."""
-    unit, weights = (t.to(mean.dtype).to(mean.device) for t in (_UNIT, _WEIGHTS))
+    unit, weights = (t.to(device=mean.device, dtype=mean.dtype) for t in (_UNIT, _WEIGHTS))
     points = mean[..., None, :] + (cholesky_2x2(cov)[..., None, :, :] @ unit[..., None])[..., 0]  # (B, K, P, 2)
-    likelihood = 1.0 - UNSEEN_DETECTION * missed[..., None] * in_view(points, agent, heading).to(mean.dtype)
+    inside = in_view_within_reach(points, agent, heading).to(mean.dtype)                  # (B, K, P)
+    likelihood = 1.0 - UNSEEN_DETECTION * missed[..., None] * inside
     w = weights * likelihood                                                               # (B, K, P)
     mass = w.sum(-1)
     moved_mean = (w[..., None] * points).sum(-2) / mass[..., None]

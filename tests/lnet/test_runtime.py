@@ -282,6 +282,8 @@ def test_negative_information_is_recorded_checked_and_another_identity_only_when
         load_lnet(checkpoint)
     with pytest.raises(ValueError, match="negative_information: needs model.tracker: filter"):
         LNetParams(model=SMALL.model_copy(update={"tracker": "lstm"}), negative_information=True)
+    with pytest.raises(ValueError, match="negative_information: needs model.visibility: true"):
+        LNetParams(model=SMALL.model_copy(update={"tracker": "filter", "visibility": False}), negative_information=True)
 
 
 def test_tracking_settings_other_than_the_defaults_need_the_filter_tracker() -> None:
