@@ -124,10 +124,12 @@ def pick_probe(profile: Profile, variant_name: str, training_seed: int, episodes
     sim = sim_of(method, profile.sim)
     variant = method.skill_owners()["pick"]
     if negative_information:
-        if loaded.lnet is None or loaded.lnet.config.tracker != "filter" or not loaded.lnet.config.visibility:
-            raise ConfigError(f"--negative-information: {variant_name!r} does not track with an L-Net filter that "
-                              "reads the PoseNet's visibility")
-        loaded.lnet.model.use_tracking(replace(loaded.lnet.model.tracking, negative_information=True))
+        if loaded.lnet is None:
+            raise ConfigError(f"--negative-information: {variant_name!r} does not observe through the L-Net")
+        try:
+            loaded.lnet.model.use_tracking(replace(loaded.lnet.model.tracking, negative_information=True))
+        except ValueError as error:
+            raise ConfigError(f"--negative-information: {variant_name!r}: {error}") from None
     if variant.is_baseline:
         env = BaselineObservation(make_task_env("pick", sim, render_frames=True), variant.baseline_input)
     else:
@@ -138,7 +140,8 @@ def pick_probe(profile: Profile, variant_name: str, training_seed: int, episodes
     finally:
         env.close()
     return {"variant": variant_name, "pick_from": variant.name, "training_seed": training_seed,
-            "policy": loaded.played_by()["policies"]["pick"], "skills_deterministic": profile.policy.skills_deterministic,
+            "policy": loaded.played_by()["policies"]["pick"],
+            "skills_deterministic": profile.policy.skills_deterministic,
             "tracking": None if loaded.lnet is None else asdict(loaded.lnet.model.tracking), **result}
 
 

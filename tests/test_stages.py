@@ -207,8 +207,7 @@ def test_baseline_stages_train_evaluate_and_fill_table_1(workspace: Path) -> Non
     refused = CliRunner().invoke(app, ["eval", "probe-pick", "--variant", "baseline_landmark", "--negative-information",
                                        "--profile", "tiny"])
     assert refused.exit_code == 2 and refused.output.strip().splitlines() == [
-        "error: --negative-information: 'baseline_landmark' does not track with an L-Net filter that reads the "
-        "PoseNet's visibility"]
+        "error: --negative-information: 'baseline_landmark' does not observe through the L-Net"]
     _run("eval", "run", "--method", "baseline_landmark", "--profile", "tiny")
     protocol = tiny["evaluate"]
     records = (workspace / "datasets/eval/baseline_landmark.jsonl").read_text().splitlines()

@@ -201,9 +201,13 @@ class LNet(nn.Module):
             self.filter = BeliefFilter(K)
 
     def use_tracking(self, tracking: TrackingSettings) -> None:
-        """Track with ``tracking`` from now on (the filter's rule and measurement noise, ``mor.lnet.filter``);
-        anything but the defaults with the LSTM tracker is a ValueError."""
+        """Track with ``tracking`` from now on (the filter's rules and measurement noise, ``mor.lnet.filter``);
+        anything but the defaults with the LSTM tracker, or negative information without the visibility head, is a
+        ValueError."""
         if self.config.tracker == "filter":
+            if tracking.negative_information and not self.config.visibility:
+                raise ValueError("negative information needs the visibility head (model.visibility: true): it reads "
+                                 "which objects the PoseNet does not see")
             self.filter.tracking = tracking
         elif tracking != TrackingSettings():
             raise ValueError(f"tracking settings need the filter tracker; this model's tracker is the LSTM "

@@ -292,6 +292,9 @@ def test_tracking_settings_other_than_the_defaults_need_the_filter_tracker() -> 
     assert lstm.tracking == TrackingSettings()
     with pytest.raises(ValueError, match="tracking settings need the filter tracker"):
         lstm.use_tracking(TrackingSettings(data_association=True))
+    blind = LNet(SMALL.model_copy(update={"tracker": "filter", "visibility": False}))
+    with pytest.raises(ValueError, match="negative information needs the visibility head"):
+        blind.use_tracking(TrackingSettings(negative_information=True))
 
 
 def test_the_identity_hashes_the_scales_and_tracking_settings_as_it_always_has() -> None:
