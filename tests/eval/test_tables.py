@@ -67,6 +67,21 @@ def test_the_policy_card_compares_with_and_without_uncertainty_by_their_interval
     assert uncertainty_comparison([_row("lnet", 0.5)], pair) == []
 
 
+def test_the_policy_card_names_the_policy_each_skill_was_fine_tuned_from() -> None:
+    from mor.eval.policy_card import policy_card_markdown
+
+    params = {"n_envs": 8, "hidden": [4], "n_steps": 8, "batch_size": 8, "n_epochs": 1, "learning_rate": 0.1,
+              "gamma": 0.9, "gae_lambda": 0.9, "clip_range": 0.2, "ent_coef": 0.0}
+    summaries = {"pick": {"steps": 10, "wall_seconds_this_run": 1.0, "steps_per_second_this_run": 10.0,
+                          "warm_start": True, "warm_start_from": "../../cards/policy/lnet/pick/policy.pth",
+                          "params": params},
+                 "drop": {"steps": 10, "wall_seconds_this_run": 1.0, "steps_per_second_this_run": 10.0,
+                          "warm_start": False, "warm_start_from": None, "params": params}}
+    card = policy_card_markdown("lnet", summaries, [], None, "tiny")
+    assert "| pick | 10 | 1 s | 10.0 | `../../cards/policy/lnet/pick` |" in card
+    assert "| drop | 10 | 1 s | 10.0 | – |" in card
+
+
 def test_each_row_short_of_the_paper_is_named_with_its_learning_curves_and_its_lnet_error() -> None:
     from mor.eval.tables import shortfalls
 
