@@ -26,7 +26,7 @@ $(BIN)/.installed: pyproject.toml
 install: $(BIN)/.installed
 
 test: install
-	$(BIN)/pytest -n 2 -m "pipeline or not pipeline"   # every test, the tiny dvc repro included (pyproject.toml)
+	$(BIN)/pytest -n 2 --dist worksteal -m "pipeline or not pipeline"   # every test, the tiny dvc repro included (pyproject.toml)
 
 repro: install
 	$(BIN)/dvc repro

@@ -3,7 +3,7 @@ run lists every stage's command there.
 
 This is what a user's first ``make repro`` does, with every stage of ``dvc.yaml`` (Tables 3 and 4's settings too) at
 toy sizes: a stage whose dep nothing makes, or whose command writes what another profile committed, stops it here
-instead of hours into a ``default`` run. About 5 minutes on 2 cores, so it is marked ``pipeline``: a plain
+instead of hours into a ``default`` run. About 7 minutes on 2 cores, so it is marked ``pipeline``: a plain
 ``pytest`` skips it, ``make test`` (and so CI) runs it. The dry run takes seconds and runs everywhere.
 """
 
