@@ -54,11 +54,12 @@ def policy_card_markdown(variant: str, summaries: dict[str, dict[str, Any]], row
              "(\"Policies\"). Load them with `mor.eval.methods.load_method`; evaluate with "
              f"`mor eval run --method {variant}`; watch one with `mor sim video --policy {variant}`.", "",
              "## Training", "",
-             "| policy | steps | wall time (last run) | steps/s | fine-tuned from (relative to the workspace) | " + " | ".join(_PPO_KEYS[1:]) + " |",
+             "| policy | steps | wall time (last run) | steps/s | fine-tuned from (relative to the workspace) | "
+             + " | ".join(_PPO_KEYS[1:]) + " |",
              "|" + "---|" * (5 + len(_PPO_KEYS) - 1)]
     for task, summary in summaries.items():
         params = summary["params"]
-        warm = f"`{Path(summary['warm_start_from']).parent.as_posix()}`" if summary.get("warm_start") else "–"
+        warm = f"`{Path(summary['warm_start_from']).parent.as_posix()}`" if summary.get("warm_start_from") else "–"
         rate = summary.get("steps_per_second_this_run") or "–"
         lines.append(f"| {task} | {summary['steps']:,} | {summary['wall_seconds_this_run']:.0f} s | {rate} | {warm} | "
                      + " | ".join(str(params[k]) for k in _PPO_KEYS[1:]) + " |")
