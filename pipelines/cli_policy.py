@@ -254,6 +254,9 @@ def bench_policy_command(
     seconds: Annotated[float, typer.Option(min=1.0, help="Seconds per measurement (bounds the run's time).")] = 10.0,
     repeats: RepeatsOption = 3,
     out: Annotated[Path, typer.Option(help="JSON to write.")] = Path("datasets/bench/policy.json"),
+    lnet: Annotated[bool, typer.Option("--lnet/--no-lnet", help="Also the rendered paths with the committed L-Net "
+                                       "(--no-lnet: the ground truth's paths only, e.g. to compare learner "
+                                       "settings).")] = True,
     profile: ProfileOption = None,
     params: ParamsOption = DEFAULT_PARAMS,
 ) -> None:
@@ -265,7 +268,7 @@ def bench_policy_command(
     from pipelines.workspaces import workspace_record  # noqa: PLC0415
 
     config = load_profile(profile, params)
-    runner = committed_lnet(workspace_record(Path("."), config), OURS, config.lnet)
+    runner = committed_lnet(workspace_record(Path("."), config), OURS, config.lnet) if lnet else None
     result = bench_policy(config.sim, config.policy.pick, config.policy.observation, runner, seconds, repeats)
     typer.echo(", ".join(f"{k} {v:.0f} steps/s" for k, v in result["steps_per_second"].items()))
     typer.echo(f"wrote {write_json(out, result)}")

@@ -6,7 +6,9 @@ The ground truth's path (keys named after its variant, ``GROUND_TRUTH.name``) is
 N: on the batched env (``mor.policy.batched_env``, what ``vec_env: batched`` trains on) and, as ``..._per_env``, on N
 ``PoseObservation`` envs in a ``DummyVecEnv`` (``vec_env: dummy``); ``batched_over_per_env`` is their ratio. The
 batched env's step rate is also taken at ``BATCHED_N_ENVS`` environments (``..._n64``), where its per-step costs are
-spread wider. Actions are uniform over each env's unmasked ones, drawn for all N at once.
+spread wider. Actions are uniform over each env's unmasked ones, drawn for all N at once. Without an L-Net
+(``runner`` None) only the ground truth's paths are measured: a learner's settings (``n_envs``, width, epochs) are
+then compared without building N rendered environments.
 """
 
 from __future__ import annotations
@@ -54,10 +56,10 @@ def _ppo_rate(env: Any, params: PPOParams, seconds: float) -> float:
     return rollouts * rollout / (time.perf_counter() - start)
 
 
-def bench_policy(sim: SimConfig, params: PPOParams, features: ObservationParams, runner: LNetRunner, seconds: float,
-                 repeats: int = 3, progress: bool = True) -> dict[str, Any]:
+def bench_policy(sim: SimConfig, params: PPOParams, features: ObservationParams, runner: LNetRunner | None,
+                 seconds: float, repeats: int = 3, progress: bool = True) -> dict[str, Any]:
     """Steps/s of each path (``seconds`` each, ``repeats`` times; medians), all in this one process; features: the
-    profile's ``policy.observation``."""
+    profile's ``policy.observation``; runner None: the ground truth's paths only."""
     torch.set_num_threads(1)
     rng = np.random.default_rng(0)
 
@@ -66,9 +68,10 @@ def bench_policy(sim: SimConfig, params: PPOParams, features: ObservationParams,
 
     truth = GROUND_TRUTH.name
     envs = {truth: make_training_env("pick", GROUND_TRUTH, sim, with_vec_env("batched"), features),
-            f"{truth}_per_env": make_training_env("pick", GROUND_TRUTH, sim, with_vec_env("dummy"), features),
-            OURS.name: make_training_env("pick", OURS, sim, with_vec_env("dummy"), features, runner),
-            f"{OURS.name}_subproc": make_training_env("pick", OURS, sim, with_vec_env("subproc"), features, runner)}
+            f"{truth}_per_env": make_training_env("pick", GROUND_TRUTH, sim, with_vec_env("dummy"), features)}
+    if runner is not None:
+        envs |= {OURS.name: make_training_env("pick", OURS, sim, with_vec_env("dummy"), features, runner),
+                 f"{OURS.name}_subproc": make_training_env("pick", OURS, sim, with_vec_env("subproc"), features, runner)}
     wide = BatchedPoseVecEnv("pick", sim, BATCHED_N_ENVS, ObservationLayout.of(GROUND_TRUTH, features))
     wide_key = f"env_{truth}_n{BATCHED_N_ENVS}"
     runs: dict[str, list[float]] = {f"{kind}_{name}": [] for kind in ("env", "ppo") for name in envs}
@@ -83,8 +86,11 @@ def bench_policy(sim: SimConfig, params: PPOParams, features: ObservationParams,
     for env in [*envs.values(), wide]:
         env.close()
     rates = {k: float(np.median(v)) for k, v in runs.items()}
-    return {"n_envs": params.n_envs, "image_size": sim.image_size, "seconds_per_measure": seconds,
-            "repeats": repeats, "lnet_encoder": runner.config.encoder, "steps_per_second": rates,
+    targets = {f"ppo_{truth}": 5000, f"ppo_{OURS.name}": 1000, wide_key: 50000}
+    return {"n_envs": params.n_envs, "hidden": list(params.hidden), "n_steps": params.n_steps,
+            "batch_size": params.batch_size, "n_epochs": params.n_epochs, "image_size": sim.image_size,
+            "seconds_per_measure": seconds, "repeats": repeats,
+            "lnet_encoder": runner.config.encoder if runner is not None else None, "steps_per_second": rates,
             "batched_over_per_env": {kind: round(rates[f"{kind}_{truth}"] / rates[f"{kind}_{truth}_per_env"], 2)
                                      for kind in ("env", "ppo")},
-            "runs": runs, "targets": {f"ppo_{truth}": 5000, f"ppo_{OURS.name}": 1000, wide_key: 50000}}
+            "runs": runs, "targets": {key: value for key, value in targets.items() if key in rates}}

@@ -134,3 +134,13 @@ def test_the_policy_benchmark_measures_every_path_in_one_run() -> None:
                                                } | {"env_gt_pose_n64"}
     assert set(result["batched_over_per_env"]) == {"env", "ppo"}
     assert all(rate > 0 for rate in result["steps_per_second"].values())
+
+
+def test_the_policy_benchmark_without_an_lnet_measures_the_ground_truths_paths_only() -> None:
+    from mor.policy.bench import bench_policy
+
+    result = bench_policy(SIM, TINY_PPO, FEATURES, None, seconds=0.2, repeats=1, progress=False)
+    assert set(result["steps_per_second"]) == {f"{kind}_{name}" for kind in ("env", "ppo")
+                                               for name in ("gt_pose", "gt_pose_per_env")} | {"env_gt_pose_n64"}
+    assert result["lnet_encoder"] is None and "ppo_lnet" not in result["targets"]
+    assert (result["hidden"], result["n_envs"]) == (list(TINY_PPO.hidden), TINY_PPO.n_envs)
