@@ -181,7 +181,7 @@ def eval_probe_pick(
 ) -> None:
     """Where a Pick skill goes wrong: per step, whether the target (or another object) was within PICK's reach, in
     view, or out of view, and the skill's PICK probability there (mor.eval.pick_probe)."""
-    from mor.eval.stats import paired_difference  # noqa: PLC0415
+    from mor.eval.pick_probe import against_probe  # noqa: PLC0415
     from pipelines.evaluate import pick_probe, read_probe  # noqa: PLC0415
     from pipelines.io import write_json  # noqa: PLC0415
 
@@ -194,8 +194,8 @@ def eval_probe_pick(
         typer.echo(f"  {name}: {result['steps'][name]} steps, mean P(PICK) "
                    + ("-" if probability is None else f"{probability:.4f}"))
     if baseline is not None:
-        difference = paired_difference(result["outcomes"], baseline["outcomes"])
-        result["against"] = {"file": str(against), "success": baseline["success"], "difference": difference}
+        result["against"] = against_probe(result, baseline, str(against))
+        difference = result["against"]["difference"]
         low, high = difference["ci95"]
         typer.echo(f"success minus {against}'s ({baseline['success']:.3f}), per episode: {difference['mean']:+.3f} "
                    f"[{low:+.3f}, {high:+.3f}] {difference['verdict']}")

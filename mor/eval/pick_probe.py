@@ -15,6 +15,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from mor.eval.stats import paired_difference
 from mor.policy.hierarchy import Skill
 from mor.sim.rules import Action, pick_candidate, visible
 
@@ -70,3 +71,10 @@ def probe_pick(env: gym.Env, skill: Skill, episodes: int, seed: int) -> dict[str
             "steps": {name: len(values) for name, values in pick.items()},
             "pick_probability": {name: float(np.mean(values)) if values else None for name, values in pick.items()},
             "outcomes": [int(s) for s in successes]}
+
+
+def against_probe(result: dict[str, Any], other: dict[str, Any], source: str) -> dict[str, Any]:
+    """``result``'s success minus ``other``'s (a probe of the same episodes, read from ``source``), per episode:
+    {"file", "success" (the other's), "difference": {"mean", "ci95", "verdict"}} (``stats.paired_difference``)."""
+    return {"file": source, "success": other["success"],
+            "difference": paired_difference(result["outcomes"], other["outcomes"])}

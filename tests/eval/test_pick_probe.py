@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mor.errors import ConfigError
-from mor.eval.pick_probe import STEP_CLASSES, probe_pick, step_class
+from mor.eval.pick_probe import STEP_CLASSES, against_probe, probe_pick, step_class
 from mor.eval.stats import paired_difference
 from mor.policy.envs import make_task_env
 from mor.policy.hierarchy import Skill
@@ -76,3 +76,11 @@ def test_a_probe_to_compare_against_must_have_played_the_same_episodes(tmp_path:
     probe.write_text("[1, 2")
     with pytest.raises(ConfigError, match="not a readable probe JSON"):
         read_probe(probe, 3, 1000)
+
+
+def test_a_probe_against_another_states_the_per_episode_difference_and_its_verdict() -> None:
+    ours = {"success": 0.6, "outcomes": [1] * 60 + [0] * 40}
+    theirs = {"success": 0.4, "outcomes": [1] * 40 + [0] * 60}
+    found = against_probe(ours, theirs, "theirs.json")
+    assert (found["file"], found["success"]) == ("theirs.json", 0.4)
+    assert found["difference"]["mean"] == pytest.approx(0.2) and found["difference"]["verdict"] == "helps"
