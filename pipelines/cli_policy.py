@@ -193,6 +193,14 @@ def eval_probe_pick(
     for name, probability in result["pick_probability"].items():
         typer.echo(f"  {name}: {result['steps'][name]} steps, mean P(PICK) "
                    + ("-" if probability is None else f"{probability:.4f}"))
+    typer.echo("episodes ended by an obstructed MOVE into " + ", ".join(
+        f"{what}: {count}" for what, count in result["obstructed_by"].items()))
+    for row in result["target_belief_by_range"]:
+        if row["steps"]:
+            span = f"{row['from_m']:.2f}-" + ("" if row["to_m"] is None else f"{row['to_m']:.2f}") + " m"
+            typer.echo(f"  target in view at {span}: {row['steps']} steps, range error {row['median_range_error_m']:+.3f}"
+                       f" m, position error {row['median_position_error_m']:.3f} m, sigma {row['median_sigma_m']:.3f} m,"
+                       f" inside its 95% ellipse {row['inside_95_ellipse']:.2f}")
     if baseline is not None:
         result["against"] = against_probe(result, baseline, str(against))
         difference = result["against"]["difference"]

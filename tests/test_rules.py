@@ -15,12 +15,15 @@ from mor.sim.rules import (
     AGENT_RADIUS,
     CAMERA_FOV,
     DROP_DISTANCE,
+    NO_OBSTACLE,
     PICK_RANGE,
+    WALL,
     Action,
     MotionNoise,
     WorldState,
     apply_action,
     drop_point,
+    first_obstacle,
     move_obstructed,
     pick_candidate,
     visible,
@@ -278,6 +281,22 @@ def test_move_checks_the_swept_path_not_only_the_end(square_arena: Arena, world)
     assert not move_obstructed(state, square_arena, 2.0)
     state = world((-1.0, 0.0, 0.0), [(0.0, 0.26)])
     assert move_obstructed(state, square_arena, 2.0)
+
+
+def test_the_first_obstacle_is_what_the_shortest_blocked_move_hits(square_arena: Arena, world) -> None:
+    # two objects straight ahead and the wall at x = 3 behind them: the nearer object is met first
+    state = world((0.0, 0.0, 0.0), [(1.5, 0.0), (0.8, 0.05), (-2.0, 2.0)])
+    assert first_obstacle(state, square_arena, 5.0) == 1
+    # object 1's disc is touched after 0.8 - sqrt(0.27^2 - 0.05^2) = 0.535 m of the move
+    assert first_obstacle(state, square_arena, 0.54) == 1
+    assert first_obstacle(state, square_arena, 0.53) == NO_OBSTACLE
+    # the same objects behind the agent: the wall ahead (x = 3, touched after 0.9 m) is what a move would hit
+    state = world((2.0, 0.0, 0.0), [(1.5, 0.0), (0.8, 0.05), (-2.0, 2.0)])
+    assert first_obstacle(state, square_arena, 5.0) == WALL
+    assert first_obstacle(state, square_arena, 0.85) == NO_OBSTACLE
+    # a held object is carried, not met
+    state = world((0.0, 0.0, 0.0), [(0.8, 0.05), (-2.0, 2.0)], held=0)
+    assert first_obstacle(state, square_arena, 5.0) == WALL
 
 
 def test_held_object_is_not_an_obstacle(square_arena: Arena, world) -> None:

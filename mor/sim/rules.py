@@ -134,7 +134,15 @@ def floor_mask(held: ArrayLike, n_objects: int) -> Flags:
 
 def paths_obstructed(agent_poses: Array, distances: Array, floor_positions: Array, on_floor: Flags, arena: Arena,
                      start_clearance: Array | None = None) -> Flags:
-    """(N,) whether sweeping each agent ``distances`` (N,) metres straight ahead hits a wall or a floor object.
+    """(N,) whether sweeping each agent ``distances`` (N,) metres straight ahead hits a wall or a floor object
+    (``path_blockers``' walls or any of its objects)."""
+    walls, objects = path_blockers(agent_poses, distances, floor_positions, on_floor, arena, start_clearance)
+    return walls | objects.any(axis=-1)
+
+
+def path_blockers(agent_poses: Array, distances: Array, floor_positions: Array, on_floor: Flags, arena: Arena,
+                  start_clearance: Array | None = None) -> tuple[Flags, Flags]:
+    """What sweeping each agent ``distances`` (N,) metres straight ahead hits: (N,) a wall, (N, n) each floor object.
 
     agent_poses (N, 3); floor_positions (N, n, 2); on_floor (N, n). start_clearance (N,), optional: each start's
     distance to the walls (``Arena.clearance``). Every point of a path lies within its distance of the start, so a
@@ -146,12 +154,38 @@ def paths_obstructed(agent_poses: Array, distances: Array, floor_positions: Arra
     end = start + distances[:, None] * heading_vector(agent_poses[:, 2])
     near = (np.arange(len(start)) if start_clearance is None
             else np.flatnonzero(start_clearance < distances + AGENT_RADIUS + _SHORTCUT_SLACK))
-    blocked = np.zeros(len(start), dtype=bool)
+    walls = np.zeros(len(start), dtype=bool)
     if len(near):
         gaps = segment_segment_distance(start[near, None], end[near, None], arena.wall_starts, arena.wall_ends)
-        blocked[near] = np.min(gaps, axis=-1) < AGENT_RADIUS
+        walls[near] = np.min(gaps, axis=-1) < AGENT_RADIUS
     gaps = point_segment_distance(floor_positions, start[:, None], end[:, None])  # (N, n)
-    return blocked | np.any(on_floor & (gaps < AGENT_RADIUS + OBJECT_RADIUS), axis=-1)
+    return walls, on_floor & (gaps < AGENT_RADIUS + OBJECT_RADIUS)
+
+
+#: ``first_obstacle``'s answers other than an object's index
+WALL, NO_OBSTACLE = -1, -2
+
+
+def first_obstacle(state: WorldState, arena: Arena, max_distance: float, tolerance: float = 1e-4) -> int:
+    """What a MOVE straight ahead would hit first within ``max_distance`` metres: a floor object's index, ``WALL``,
+    or ``NO_OBSTACLE``; the shortest blocked sweep found by bisection to ``tolerance`` metres (``path_blockers``)."""
+    def blockers(distance: float) -> tuple[Flags, Flags]:
+        walls, objects = path_blockers(state.agent_pose[None], np.array([distance]), state.floor_positions[None],
+                                       state.on_floor()[None], arena)
+        return walls[0], objects[0]
+
+    walls, objects = blockers(max_distance)
+    if not (walls or objects.any()):
+        return NO_OBSTACLE
+    low, high = 0.0, max_distance  # free at low (or nothing moved), blocked at high
+    while high - low > tolerance:
+        middle = 0.5 * (low + high)
+        walls_middle, objects_middle = blockers(middle)
+        if walls_middle or objects_middle.any():
+            high, walls, objects = middle, walls_middle, objects_middle
+        else:
+            low = middle
+    return int(np.argmax(objects)) if objects.any() else WALL
 
 
 def visible_objects(agent_poses: Array, floor_positions: Array, on_floor: Flags) -> Flags:

@@ -10,7 +10,17 @@ import numpy as np
 import pytest
 
 from mor.errors import ConfigError
-from mor.eval.pick_probe import STEP_CLASSES, against_probe, probe_pick, step_class
+from mor.eval.pick_probe import (
+    FLOOR_IN_SIGHT_M,
+    OBSTACLES,
+    STEP_CLASSES,
+    against_probe,
+    belief_by_range,
+    obstacle_class,
+    probe_pick,
+    step_class,
+    target_belief_error,
+)
 from mor.eval.stats import paired_difference
 from mor.policy.envs import make_task_env
 from mor.policy.hierarchy import Skill
@@ -84,3 +94,56 @@ def test_a_probe_against_another_states_the_per_episode_difference_and_its_verdi
     found = against_probe(ours, theirs, "theirs.json")
     assert (found["file"], found["success"]) == ("theirs.json", 0.4)
     assert found["difference"]["mean"] == pytest.approx(0.2) and found["difference"]["verdict"] == "helps"
+
+
+class _Forward(Skill):
+    """A skill that always MOVEs: its episodes end where the first MOVE is obstructed (or at the horizon)."""
+
+    def __init__(self) -> None:
+        super().__init__(None, deterministic=False)
+
+    def probabilities(self, vectors: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        p = np.zeros((len(masks), N_ACTIONS))
+        p[:, Action.MOVE] = 1.0
+        return p
+
+
+def test_each_obstructed_episode_is_counted_once_by_what_its_move_hit() -> None:
+    env = make_task_env("pick", SIM, render_frames=False, horizon=200)
+    expected = dict.fromkeys(OBSTACLES, 0)
+    for episode in range(8):
+        env.reset(seed=30 + episode)
+        done = False
+        while not done:
+            hit = obstacle_class(env)
+            _, _, terminated, truncated, info = env.step(int(Action.MOVE))
+            done = terminated or truncated
+        if info["obstructed"]:
+            expected[hit] += 1
+    result = probe_pick(env, _Forward(), episodes=8, seed=30)
+    assert result["obstructed_by"] == expected
+    assert sum(expected.values()) == 8  # driving straight on, each episode ends against something
+    assert result["target_belief_by_range"][0]["steps"] == 0  # no belief kept: every bin empty
+
+
+def test_the_belief_errors_are_grouped_by_the_targets_true_distance() -> None:
+    samples = [(0.3, 0.1, 0.1, 0.05, 4.0), (0.35, 0.2, 0.2, 0.05, 16.0), (0.8, 0.0, 0.02, 0.05, 0.2), (9.0, -1, 1, 2, 1)]
+    bins = belief_by_range(samples)
+    assert [b["steps"] for b in bins] == [2, 0, 1, 0, 0, 1] and bins[-1]["to_m"] is None
+    assert bins[0]["from_m"] == 0.0 and bins[1]["from_m"] == pytest.approx(FLOOR_IN_SIGHT_M, abs=0.005)
+    assert bins[0]["median_range_error_m"] == pytest.approx(0.15) and bins[0]["inside_95_ellipse"] == 0.5
+    assert bins[2]["inside_95_ellipse"] == 1.0 and "median_sigma_m" not in bins[1]
+
+
+def test_the_truths_belief_holds_its_target_and_has_no_error() -> None:
+    from mor.policy.envs import make_policy_env  # noqa: PLC0415
+    from mor.policy.features import ObservationLayout  # noqa: PLC0415
+    from mor.policy.observations import GroundTruthTracker  # noqa: PLC0415
+
+    env = make_policy_env("pick", SIM, GroundTruthTracker(), ObservationLayout(uncertainty=False))
+    samples = []
+    for episode in range(20):
+        env.reset(seed=episode)
+        samples.append(target_belief_error(env))
+    seen = [s for s in samples if s is not None]
+    assert seen and all(abs(s[1]) < 1e-5 and s[2] < 1e-5 and s[3] == 0.0 and s[4] == 0.0 for s in seen)
