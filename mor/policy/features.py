@@ -45,25 +45,35 @@ from mor.sim.arena import Arena
 
 #: the ``ObservationParams`` fields that only a layout with the stated belief (``search``) reads
 SEARCH_FIELDS: tuple[str, ...] = ("search_sectors", "search_ring_edges_m")
+#: the ``ObservationParams`` fields that only a layout with the PICK gate (``gate``) reads; they mask an action and
+#: change no feature, so a policy may warm-start from one trained without them
+GATE_FIELDS: tuple[str, ...] = ("pick_gate_probability",)
 
 
 @dataclass(frozen=True)
 class ObservationLayout:
     """What a pose policy's vector holds: the uncertainty entries or not, the stated belief's parts or not, and
-    the derived features' settings (``features``: the free-space rays, the search sectors)."""
+    the derived features' settings (``features``: the free-space rays, the search sectors); ``gate``: its Pick skill
+    reads the PICK gate (``mor.policy.pick_gate``; only the L-Net's beliefs with uncertainty)."""
 
     uncertainty: bool = True
     search: bool = False
     features: ObservationParams = field(default_factory=ObservationParams)
+    gate: bool = False
 
     @classmethod
     def of(cls, variant: Variant, features: ObservationParams) -> ObservationLayout:
         """``variant``'s layout with the profile's ``policy.observation`` settings."""
-        return cls(variant.uncertainty, variant.search, features)
+        return cls(variant.uncertainty, variant.search, features, variant.uses_lnet and variant.uncertainty)
 
     def read_fields(self) -> tuple[str, ...]:
         """The ``ObservationParams`` fields this layout reads."""
-        return tuple(name for name in ObservationParams.model_fields if self.search or name not in SEARCH_FIELDS)
+        return tuple(name for name in ObservationParams.model_fields
+                     if (self.search or name not in SEARCH_FIELDS) and (self.gate or name not in GATE_FIELDS))
+
+    def pick_gate_probability(self, task: Task) -> float:
+        """The PICK gate's probability for this layout's ``task`` skill (0: no gate)."""
+        return self.features.pick_gate_probability if self.gate and task == "pick" else 0.0
 
     def recorded_features(self) -> ObservationParams:
         """``features`` as a policy's signature records them: the fields this layout does not read at their

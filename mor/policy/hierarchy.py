@@ -24,6 +24,7 @@ from mor.policy.belief import PoseBelief
 from mor.policy.features import Encode, ObservationLayout, observation_vector, pose_inputs
 from mor.policy.names import Task
 from mor.policy.observations import BatchTracker, observation_space, task_goal
+from mor.policy.pick_gate import PickGate
 from mor.sim.arena import Arena
 from mor.sim.metrics import is_fixed
 from mor.sim.rules import N_ACTIONS, Action
@@ -46,22 +47,25 @@ POLICY_FILE = "policy.pth"  # a trained policy for inference: ``mor.policy.polic
 
 class Skill:
     """A frozen policy from sb3-contrib's MaskablePPO (a trained ``MaskablePPO`` or its
-    ``MaskableActorCriticPolicy``): ``act(vector (D,), mask (A,), rng) -> action``.
+    ``MaskableActorCriticPolicy``): ``act(vector (D,), mask (A,), rng) -> action``; ``gate``: a Pick skill's PICK
+    gate (``mor.policy.pick_gate``), applied to every mask it is given.
 
     deterministic: the most likely allowed action; otherwise an action drawn from the policy's distribution with
     the caller's generator (one per episode, seeded by the episode: the draws do not depend on batching).
     """
 
-    def __init__(self, model: Any, deterministic: bool = True) -> None:
+    def __init__(self, model: Any, deterministic: bool = True, gate: PickGate | None = None) -> None:
         self.policy = getattr(model, "policy", model)
         self.deterministic = deterministic
+        self.gate = gate
 
     @classmethod
     def load(cls, path: Path, deterministic: bool = True) -> Skill:
-        """The policy saved at ``path`` (a ``policy.pth``), loaded without unpickling (``mor.policy.policy_file``)."""
+        """The policy saved at ``path`` (a ``policy.pth``), loaded without unpickling (``mor.policy.policy_file``),
+        with the PICK gate its signature (``meta.json`` beside it) records, if any."""
         from mor.policy.policy_file import load_policy_file  # noqa: PLC0415 - SB3 only where a policy is loaded
 
-        return cls(load_policy_file(path), deterministic)
+        return cls(load_policy_file(path), deterministic, PickGate.recorded(path.parent / "meta.json"))
 
     def act(self, vector: np.ndarray, mask: np.ndarray, rng: np.random.Generator | None = None) -> int:
         """vector (D,), mask (A,) -> one action."""
@@ -69,7 +73,9 @@ class Skill:
 
     def probabilities(self, vectors: np.ndarray, masks: np.ndarray) -> np.ndarray:
         """vectors (k, D) (or a dict of (k, ...) arrays), masks (k, A) bool -> (k, A) float64 the policy's action
-        probabilities (0 where masked): one forward pass."""
+        probabilities (0 where masked; PICK also where the skill's gate forbids it): one forward pass."""
+        if self.gate is not None:
+            masks = self.gate.mask(vectors, masks)
         observations, _ = self.policy.obs_to_tensor(vectors)
         with torch.no_grad():
             distribution = self.policy.get_distribution(observations, action_masks=masks)

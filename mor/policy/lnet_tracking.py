@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices
 
 from mor.data.schema import NO_ACTION
 from mor.lnet.runtime import LNetRunner
@@ -15,9 +16,10 @@ from mor.lnet.stated import Estimates
 from mor.lnet.search import SearchMap
 from mor.lnet.streaming import StreamingTracker, stack_frames
 from mor.policy.belief import PoseBelief, SearchBelief
-from mor.policy.features import ObservationLayout, observation_vector
+from mor.policy.features import ObservationLayout, feature_names, observation_vector
 from mor.policy.names import Task
 from mor.policy.observations import SingleTracker, observation_space, task_goal
+from mor.policy.pick_gate import PickGate
 from mor.sim.arena import Arena
 
 
@@ -61,12 +63,15 @@ class LNetTracker(SingleTracker):
 class LNetVecObservation(VecEnvWrapper):
     """A vector of rendered MOR envs (Pick or Drop) whose observations become the policy vector of the L-Net's
     belief: one L-Net forward per vector step (two when an episode ends: its last frame, then the next
-    episode's first; ``info["terminal_observation"]`` is the last frame's vector, as SB3 expects)."""
+    episode's first; ``info["terminal_observation"]`` is the last frame's vector, as SB3 expects). ``vectors``: the
+    envs' current vectors, which the layout's PICK gate reads for ``action_masks``."""
 
     def __init__(self, venv: VecEnv, runner: LNetRunner, task: Task, n_objects: int, layout: ObservationLayout
                  ) -> None:
         super().__init__(venv, observation_space=observation_space(task, n_objects, layout))
         self.runner, self.task, self.layout = runner, task, layout
+        self.gate = PickGate.of(feature_names(task, n_objects, layout), layout.pick_gate_probability(task))
+        self.vectors = np.zeros((venv.num_envs, self.observation_space.shape[0]), np.float32)
         self.arena = venv.get_attr("arena")[0]
         self.stream = self._stream()
         self.actions = np.full(venv.num_envs, NO_ACTION)
@@ -75,7 +80,8 @@ class LNetVecObservation(VecEnvWrapper):
         observations = self.venv.reset()
         self.stream = self._stream()
         starting = np.ones(self.num_envs, dtype=bool)
-        return self._vectors(self.stream.step(observations, self.actions, starting), observations)
+        self.vectors = self._vectors(self.stream.step(observations, self.actions, starting), observations)
+        return self.vectors
 
     def step_async(self, actions: np.ndarray) -> None:
         self.actions = np.asarray(actions)
@@ -85,8 +91,8 @@ class LNetVecObservation(VecEnvWrapper):
         observations, rewards, dones, infos = self.venv.step_wait()
         ended = np.asarray(dones, dtype=bool)
         if not ended.any():
-            vectors = self._vectors(self.stream.step(observations, self.actions, ended), observations)
-            return vectors, rewards, dones, infos
+            self.vectors = self._vectors(self.stream.step(observations, self.actions, ended), observations)
+            return self.vectors, rewards, dones, infos
         done = np.flatnonzero(ended)
         last = {key: value.copy() for key, value in observations.items()}
         for index in done:
@@ -96,10 +102,21 @@ class LNetVecObservation(VecEnvWrapper):
         last_vectors = self._vectors(last_estimates, last)
         for index in done:
             infos[index]["terminal_observation"] = last_vectors[index]
-        return self._vectors(now, observations), rewards, dones, infos
+        self.vectors = self._vectors(now, observations)
+        return self.vectors, rewards, dones, infos
 
     def _stream(self) -> StreamingTracker:
         return StreamingTracker(self.runner, self.num_envs, self.arena if self.layout.search else None)
+
+    def env_method(self, method_name: str, *method_args: Any, indices: VecEnvIndices = None,
+                   **method_kwargs: Any) -> list[Any]:
+        """The envs' ``method_name``; ``action_masks`` less PICK where the layout's PICK gate forbids it (from each
+        env's latest vector: what MaskablePPO asks before it acts)."""
+        found = self.venv.env_method(method_name, *method_args, indices=indices, **method_kwargs)
+        if method_name != "action_masks" or self.gate is None:
+            return found
+        rows = self._get_indices(indices)
+        return list(self.gate.mask(self.vectors[list(rows)], np.stack(found)))
 
     def _vectors(self, estimates: Estimates, observations: dict[str, np.ndarray]) -> np.ndarray:
         goal = task_goal(observations, self.task)

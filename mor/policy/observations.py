@@ -14,7 +14,8 @@ import numpy as np
 from gymnasium import spaces
 
 from mor.policy.belief import PoseBelief
-from mor.policy.features import ObservationLayout, observation_size, observation_vector
+from mor.policy.features import ObservationLayout, feature_names, observation_size, observation_vector
+from mor.policy.pick_gate import PickGate
 from mor.policy.names import Task
 from mor.sim.tasks import DropEnv, PickEnv, RearrangeEnv
 
@@ -98,7 +99,8 @@ class GroundTruthTracker(SingleTracker):
 class PoseObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """A MOR env whose observation is the flat policy vector (``mor.policy.features``) of a tracker's belief.
 
-    observation_space: Box (D,) float32; ``action_masks()`` is the env's; ``belief``: the tracker's latest belief
+    observation_space: Box (D,) float32; ``action_masks()`` is the env's, less PICK where the layout's PICK gate
+    forbids it; ``belief`` and ``vector``: the tracker's latest belief and its observation
     (``info`` stays the env's plain values); layout: what the vector holds (a variant's:
     ``ObservationLayout.of(variant, profile.policy.observation)``). Its constructor's arguments are recorded in
     ``spec``, so that ``spec.make()`` (Gymnasium's ``check_env``) builds it again.
@@ -109,8 +111,11 @@ class PoseObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         super().__init__(env)
         self.task: Task = task_of(env)
         self.tracker, self.layout = tracker, layout
-        self.observation_space = observation_space(self.task, env.unwrapped.config.n_objects, layout)
+        n_objects = env.unwrapped.config.n_objects
+        self.observation_space = observation_space(self.task, n_objects, layout)
+        self.gate = PickGate.of(feature_names(self.task, n_objects, layout), layout.pick_gate_probability(self.task))
         self.belief: PoseBelief | None = None
+        self.vector: np.ndarray | None = None
 
     def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
         observation, info = self.env.reset(**kwargs)
@@ -123,9 +128,12 @@ class PoseObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return self._vector(observation), reward, terminated, truncated, info
 
     def action_masks(self) -> np.ndarray:
-        return self.env.unwrapped.action_masks()
+        """(A,) the env's mask, with PICK cleared where the layout's PICK gate forbids it (``mor.policy.pick_gate``)."""
+        mask = self.env.unwrapped.action_masks()
+        return mask if self.gate is None else self.gate.mask(self.vector[None], mask[None])[0]
 
     def _vector(self, observation: dict[str, Any]) -> np.ndarray:
         goal = task_goal(observation, self.task)[None]
-        return observation_vector(self.belief, np.array([observation["held"]]), self.task, goal, self.layout,
-                                  self.env.unwrapped.arena)[0]
+        self.vector = observation_vector(self.belief, np.array([observation["held"]]), self.task, goal, self.layout,
+                                         self.env.unwrapped.arena)[0]
+        return self.vector

@@ -85,7 +85,8 @@ class BaselineParams(ParamsModel):
 
 class ObservationParams(ParamsModel):
     """The derived features of the pose policies' observation (``mor.policy.features``): the free-space rays and
-    the search belief's sectors. They are part of a policy's signature: a policy loads only where they match."""
+    the search belief's sectors, and the PICK gate read from the same vector. They are part of a policy's signature:
+    a policy loads only where they match."""
 
     clearance_rays_deg: list[float] = Field(
         default_factory=lambda: [-60.0, -30.0, 0.0, 30.0, 60.0], min_length=1,
@@ -93,6 +94,12 @@ class ObservationParams(ParamsModel):
     clearance_max_m: float = Field(3.0, gt=0, description="metres: a free-space ray is cut here")
     search_sectors: int = Field(8, ge=1, le=360, description="bearing sectors of equal width around the believed "
                                                             "heading that the search belief's mass is read in")
+    pick_gate_probability: float = Field(
+        0.0, ge=0.0, lt=1.0,
+        description="the PICK gate (mor.policy.pick_gate): a Pick skill of an L-Net variant with uncertainty may PICK "
+                    "only where its belief gives the target at least this probability of lying within reach and "
+                    "view; 0: off. Not an observation but an action mask read from it, kept here so that a policy's "
+                    "signature records it")
     search_ring_edges_m: list[float] = Field(
         default_factory=lambda: [PICK_RANGE], min_length=1,
         description="metres: the outer radii of the search sectors' range rings, increasing (the last ring is "

@@ -112,6 +112,36 @@ def test_the_batched_lnet_wrapper_equals_one_tracker_per_env_across_episode_ends
     assert ends > 0, "the test must cross at least one episode end"
 
 
+def test_the_batched_lnet_wrapper_gates_pick_as_each_env_does() -> None:
+    """With the PICK gate on, MaskablePPO's masks from the batched wrapper are each env's gated ``action_masks``."""
+    from sb3_contrib.common.maskable.utils import get_action_masks
+
+    from mor.policy.pick_gate import PickGate
+
+    runner, n_envs = _runner(), 2
+    layout = ObservationLayout(features=ObservationParams(pick_gate_probability=0.05), gate=True)
+    vec = LNetVecObservation(DummyVecEnv([lambda: make_task_env("pick", SIM, True)] * n_envs), runner, "pick", 2,
+                             layout)
+    vec.seed(3)
+    singles = [make_policy_env("pick", SIM, LNetTracker(runner), layout) for _ in range(n_envs)]
+    vec.reset()
+    for i, env in enumerate(singles):
+        env.reset(seed=3 + i)
+    gate = PickGate.of(feature_names("pick", 2, layout), 0.05)
+    rng, gated = np.random.default_rng(1), 0
+    for _ in range(25):
+        masks = get_action_masks(vec)
+        np.testing.assert_array_equal(masks, np.stack([env.action_masks() for env in singles]))
+        np.testing.assert_array_equal(masks, gate.mask(vec.vectors, np.stack([env.unwrapped.action_masks()
+                                                                               for env in singles])))
+        gated += int((~masks[:, 3]).sum())
+        actions = rng.choice([0, 1, 2], n_envs)  # no PICK: the episodes go on
+        vec.step(actions)
+        for i, env in enumerate(singles):
+            env.step(int(actions[i]))
+    assert gated > 0, "the test must meet a masked PICK"
+
+
 def test_clearance_is_the_free_distance_to_walls_and_floor_objects_but_not_the_held_one() -> None:
     from mor.policy.clearance import clearance
     from mor.sim.catalog import OBJECT_RADIUS
