@@ -66,20 +66,21 @@ class ObservationLayout:
         """``variant``'s layout with the profile's ``policy.observation`` settings."""
         return cls(variant.uncertainty, variant.search, features, variant.uses_lnet and variant.uncertainty)
 
-    def read_fields(self) -> tuple[str, ...]:
-        """The ``ObservationParams`` fields this layout reads."""
+    def read_fields(self, task: Task) -> tuple[str, ...]:
+        """The ``ObservationParams`` fields this layout's ``task`` policy reads (the gate's only for pick)."""
+        gated = self.gate and task == "pick"
         return tuple(name for name in ObservationParams.model_fields
-                     if (self.search or name not in SEARCH_FIELDS) and (self.gate or name not in GATE_FIELDS))
+                     if (self.search or name not in SEARCH_FIELDS) and (gated or name not in GATE_FIELDS))
 
     def pick_gate_probability(self, task: Task) -> float:
         """The PICK gate's probability for this layout's ``task`` skill (0: no gate)."""
         return self.features.pick_gate_probability if self.gate and task == "pick" else 0.0
 
-    def recorded_features(self) -> ObservationParams:
-        """``features`` as a policy's signature records them: the fields this layout does not read at their
+    def recorded_features(self, task: Task) -> ObservationParams:
+        """``features`` as a ``task`` policy's signature records them: the fields it does not read at their
         defaults, so that a setting a policy never reads refuses none of its loads."""
         defaults = ObservationParams()
-        unread = (name for name in ObservationParams.model_fields if name not in self.read_fields())
+        unread = (name for name in ObservationParams.model_fields if name not in self.read_fields(task))
         return self.features.model_copy(update={name: getattr(defaults, name) for name in unread})
 
 

@@ -41,7 +41,7 @@ class PolicySignature(BaseModel):
         return cls(task=task, variant=variant.name, n_objects=n_objects, arena=arena,
                    observation=feature_names(task, n_objects, layout),
                    lnet_version=lnet_version if variant.uses_lnet else None,
-                   stated_version=stated_version if variant.search else None, features=layout.recorded_features())
+                   stated_version=stated_version if variant.search else None, features=layout.recorded_features(task))
 
     @classmethod
     def of_baseline(cls, task: Task, variant: Variant, n_objects: int, arena: str, image_size: int

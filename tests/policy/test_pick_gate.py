@@ -99,6 +99,10 @@ def test_a_policy_records_its_gate_and_plays_with_it(tmp_path: Path) -> None:
     assert lnet.features.pick_gate_probability == 0.6
     for name in ("gt_pose", "lnet_no_uncertainty"):  # only the L-Net's beliefs with uncertainty read it
         assert PolicySignature.of("pick", VARIANTS[name], 2, "square", "v", GATED).features.pick_gate_probability == 0
+    for task in ("drop", "decision"):  # and only their Pick skills: a Drop trained without the gate still loads
+        write_signature(tmp_path / "meta.json", PolicySignature.of(task, VARIANTS["lnet"], 2, "square", "v",
+                                                                   ObservationParams()))
+        check_signature(tmp_path / "meta.json", PolicySignature.of(task, VARIANTS["lnet"], 2, "square", "v", GATED))
     write_signature(tmp_path / "meta.json", lnet)
     gate = PickGate.recorded(tmp_path / "meta.json")
     assert gate is not None and gate.probability == 0.6
