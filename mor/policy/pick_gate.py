@@ -1,8 +1,9 @@
 """The PICK gate: a Pick skill with uncertainty may PICK only where its belief gives the target at least a set
 probability of lying where PICK takes it (within ``PICK_RANGE`` and inside the camera's field of view).
 
-PICK ends a Pick episode, so a PICK at a target believed in reach but not there is a failure the belief's own
-covariance often foresaw (docs/assumptions.md, "The PICK gate"). The probability is read from the policy's own
+PICK ends a Pick episode, so a PICK at a target believed in reach but not there is a failure that an honest
+covariance would foresee (docs/assumptions.md, "The PICK gate, off": trained with it, ``lnet`` PICKed wrongly less
+and drove into things more, and picked no better). The probability is read from the policy's own
 observation vector (``mor.policy.features``): the goal's polar position from the believed agent, the goal's and the
 agent's ego-frame uncertainty triples and the heading's σ. The relative position is taken as Gaussian with the sum of
 the two covariances, the heading error as an independent Gaussian; the probability is the share of a fixed set of
