@@ -54,12 +54,13 @@ def step_class(env: gym.Env) -> str:
     return STEP_CLASSES[2] if visible(base.state, goal) else STEP_CLASSES[3]
 
 
-def obstacle_class(env: gym.Env) -> str | None:
-    """The ``OBSTACLES`` entry a MOVE straight ahead from a Pick env's current state would hit first, None if none."""
+def obstacle_class(env: gym.Env) -> str:
+    """The ``OBSTACLES`` entry a MOVE straight ahead from a Pick env's current state would hit first (a state whose
+    MOVE was just obstructed: something lies within the longest MOVE)."""
     base = env.unwrapped
     hit = first_obstacle(base.state, base.arena, base.noise.move_mean + _MOVE_SEARCH_SIGMAS * base.noise.move_std)
     if hit == NO_OBSTACLE:
-        return None
+        raise RuntimeError("obstacle_class: nothing lies within the longest MOVE ahead; call it after an obstructed MOVE")
     return OBSTACLES[2] if hit == WALL else OBSTACLES[0] if hit == base.goal_object else OBSTACLES[1]
 
 
@@ -134,10 +135,9 @@ def probe_pick(env: gym.Env, skill: Skill, episodes: int, seed: int) -> dict[str
             probabilities = skill.probabilities(_batch(observation), env.action_masks()[None])[0]
             pick[name].append(float(probabilities[Action.PICK]))
             action = int(skill.choose(probabilities[None], [rng])[0])
-            obstacle = obstacle_class(env) if action == Action.MOVE else None
             observation, _, terminated, truncated, info = env.step(action)
-            if info["obstructed"] and obstacle is not None:
-                obstructed_by[obstacle] += 1
+            if info["obstructed"]:  # an obstructed MOVE leaves the world as it was: ask what was ahead now
+                obstructed_by[obstacle_class(env)] += 1
             done = terminated or truncated
         successes.append(bool(info["metrics"]["success"]))
         reached.append(ever)

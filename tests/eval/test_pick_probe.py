@@ -16,7 +16,6 @@ from mor.eval.pick_probe import (
     STEP_CLASSES,
     against_probe,
     belief_by_range,
-    obstacle_class,
     probe_pick,
     step_class,
     target_belief_error,
@@ -25,7 +24,7 @@ from mor.eval.stats import paired_difference
 from mor.policy.envs import make_task_env
 from mor.policy.hierarchy import Skill
 from mor.sim.config import SimConfig
-from mor.sim.rules import Action, N_ACTIONS
+from mor.sim.rules import N_ACTIONS, WALL, Action, first_obstacle
 from pipelines.evaluate import read_probe
 
 SIM = SimConfig(n_objects=2, image_size=16)
@@ -115,11 +114,14 @@ def test_each_obstructed_episode_is_counted_once_by_what_its_move_hit() -> None:
         env.reset(seed=30 + episode)
         done = False
         while not done:
-            hit = obstacle_class(env)
+            before = env.unwrapped.state.copy()
             _, _, terminated, truncated, info = env.step(int(Action.MOVE))
             done = terminated or truncated
         if info["obstructed"]:
-            expected[hit] += 1
+            hit = first_obstacle(before, env.unwrapped.arena, 1.0)  # from the state before the step, independently
+            goal = env.unwrapped.goal_object
+            expected[OBSTACLES[2] if hit == WALL else OBSTACLES[0] if hit == goal else OBSTACLES[1]] += 1
+            np.testing.assert_array_equal(env.unwrapped.state.agent_pose, before.agent_pose)  # nothing moved
     result = probe_pick(env, _Forward(), episodes=8, seed=30)
     assert result["obstructed_by"] == expected
     assert sum(expected.values()) == 8  # driving straight on, each episode ends against something
