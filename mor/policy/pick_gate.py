@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from mor.sim.geometry import wrap_angle
 from mor.sim.rules import CAMERA_FOV, PICK_RANGE, Action
 
 #: standard-normal draws per vector: (x, y, heading) each
@@ -48,8 +49,7 @@ def reach_probability(entries: NDArray) -> NDArray[np.float64]:
     covariance += 1e-12 * np.eye(2)  # the truth's zeros: a point mass, still factorable
     root = np.linalg.cholesky(covariance)                                          # (N, 2, 2)
     points = mean[:, None] + np.einsum("nij,sj->nsi", root, _DRAWS[:, :2])         # (N, S, 2)
-    bearing = np.arctan2(points[..., 1], points[..., 0]) - e[:, 9:10] * _DRAWS[None, :, 2]
-    bearing = (bearing + np.pi) % (2.0 * np.pi) - np.pi
+    bearing = wrap_angle(np.arctan2(points[..., 1], points[..., 0]) - e[:, 9:10] * _DRAWS[None, :, 2])
     inside = (np.linalg.norm(points, axis=-1) <= PICK_RANGE) & (np.abs(bearing) <= CAMERA_FOV / 2.0)
     return inside.mean(axis=-1)
 

@@ -18,6 +18,7 @@ from mor.policy.pick_gate import GATE_FEATURES, PickGate, reach_probability
 from mor.policy.signature import PolicySignature, check_signature, warm_start_names, write_signature
 from mor.policy.variants import VARIANTS
 from mor.sim.config import SimConfig
+from mor.sim.geometry import wrap_angle
 from mor.sim.rules import CAMERA_FOV, N_ACTIONS, PICK_RANGE, Action
 
 SIM = SimConfig(n_objects=2, image_size=16)
@@ -82,8 +83,7 @@ def test_the_gated_env_masks_pick_where_the_truth_is_out_of_reach_or_view() -> N
         env.reset(seed=episode)
         base = env.unwrapped
         offset = base.state.floor_positions[base.goal_object] - base.state.agent_pose[:2]
-        bearing = np.arctan2(offset[1], offset[0]) - base.state.agent_pose[2]
-        bearing = (bearing + np.pi) % (2 * np.pi) - np.pi
+        bearing = wrap_angle(np.arctan2(offset[1], offset[0]) - base.state.agent_pose[2])
         expected = np.linalg.norm(offset) <= PICK_RANGE and abs(bearing) <= CAMERA_FOV / 2
         mask = env.action_masks()
         assert mask.shape == (N_ACTIONS,) and mask[Action.PICK] == expected
