@@ -62,9 +62,12 @@ class LNetTracker(SingleTracker):
 
 class LNetVecObservation(VecEnvWrapper):
     """A vector of rendered MOR envs (Pick or Drop) whose observations become the policy vector of the L-Net's
-    belief: one L-Net forward per vector step (two when an episode ends: its last frame, then the next
-    episode's first; ``info["terminal_observation"]`` is the last frame's vector, as SB3 expects). ``vectors``: the
-    envs' current vectors, which the layout's PICK gate reads for ``action_masks``."""
+    belief: one L-Net forward per vector step. Where an episode was truncated (its horizon reached), a second
+    forward tracks its last frame too, and ``info["terminal_observation"]`` is that frame's vector: what SB3
+    bootstraps the value from. Where it terminated (a PICK, a DROP, an obstruction), nothing bootstraps from its last
+    state (SB3 reads ``terminal_observation`` only with ``TimeLimit.truncated``), so that frame is not tracked and
+    the key is removed: one forward instead of two on most of a Pick run's vector steps (docs/performance.md).
+    ``vectors``: the envs' current vectors, which the layout's PICK gate reads for ``action_masks``."""
 
     def __init__(self, venv: VecEnv, runner: LNetRunner, task: Task, n_objects: int, layout: ObservationLayout
                  ) -> None:
@@ -90,17 +93,19 @@ class LNetVecObservation(VecEnvWrapper):
     def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
         observations, rewards, dones, infos = self.venv.step_wait()
         ended = np.asarray(dones, dtype=bool)
-        if not ended.any():
+        truncated = ended & np.array([bool(info.get("TimeLimit.truncated", False)) for info in infos])
+        for index in np.flatnonzero(ended & ~truncated):
+            del infos[index]["terminal_observation"]
+        if not truncated.any():
             self.vectors = self._vectors(self.stream.step(observations, self.actions, ended), observations)
             return self.vectors, rewards, dones, infos
-        done = np.flatnonzero(ended)
         last = {key: value.copy() for key, value in observations.items()}
-        for index in done:
+        for index in np.flatnonzero(truncated):
             for key, value in infos[index]["terminal_observation"].items():
                 last[key][index] = value
         now, last_estimates = self.stream.step_across_ends(last, observations, self.actions, ended)
         last_vectors = self._vectors(last_estimates, last)
-        for index in done:
+        for index in np.flatnonzero(truncated):
             infos[index]["terminal_observation"] = last_vectors[index]
         self.vectors = self._vectors(now, observations)
         return self.vectors, rewards, dones, infos

@@ -87,16 +87,18 @@ def _runner() -> LNetRunner:
 
 
 def test_the_batched_lnet_wrapper_equals_one_tracker_per_env_across_episode_ends() -> None:
-    """One forward per vector step (two when an episode ends) gives what a per-env tracker gives, terminal
-    observations included."""
-    runner, n_envs, steps = _runner(), 2, 40
-    vec = LNetVecObservation(DummyVecEnv([lambda: make_task_env("pick", SIM, True)] * n_envs), runner, "pick", 2,
-                             ObservationLayout())
+    """One forward per vector step (two when an episode is truncated) gives what a per-env tracker gives: a
+    truncated episode's terminal observation is its last frame's vector; a terminated one has none (SB3 never
+    bootstraps from it)."""
+    runner, n_envs, steps, horizon = _runner(), 2, 60, 6
+    vec = LNetVecObservation(DummyVecEnv([lambda: make_task_env("pick", SIM, True, horizon=horizon)] * n_envs),
+                             runner, "pick", 2, ObservationLayout())
     vec.seed(7)
-    singles = [make_policy_env("pick", SIM, LNetTracker(runner), ObservationLayout()) for _ in range(n_envs)]
+    singles = [make_policy_env("pick", SIM, LNetTracker(runner), ObservationLayout(), horizon=horizon)
+               for _ in range(n_envs)]
     batched = vec.reset()
     single = [env.reset(seed=7 + i)[0] for i, env in enumerate(singles)]
-    rng, ends = np.random.default_rng(0), 0
+    rng, ends = np.random.default_rng(0), {"terminated": 0, "truncated": 0}
     for _ in range(steps):
         np.testing.assert_allclose(batched, np.stack(single), atol=1e-5)
         actions = rng.choice([0, 1, 2, 3], n_envs, p=[0.5, 0.2, 0.2, 0.1])
@@ -104,12 +106,16 @@ def test_the_batched_lnet_wrapper_equals_one_tracker_per_env_across_episode_ends
         for i, env in enumerate(singles):
             vector, _, terminated, truncated, _ = env.step(int(actions[i]))
             assert dones[i] == (terminated or truncated)
-            if dones[i]:
-                ends += 1
+            assert infos[i].get("TimeLimit.truncated", False) == truncated
+            if truncated:
                 np.testing.assert_allclose(infos[i]["terminal_observation"], vector, atol=1e-5)
+            if terminated:
+                assert "terminal_observation" not in infos[i]
+            if dones[i]:
+                ends["truncated" if truncated else "terminated"] += 1
                 vector = env.reset()[0]  # DummyVecEnv resets without a seed: the env's own generator goes on
             single[i] = vector
-    assert ends > 0, "the test must cross at least one episode end"
+    assert min(ends.values()) > 0, f"the test must cross both kinds of episode end: {ends}"
 
 
 def test_the_batched_lnet_wrapper_gates_pick_as_each_env_does() -> None:
