@@ -19,7 +19,7 @@ import hashlib
 import json
 import logging
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -134,7 +134,8 @@ class LNetRunner:
     @torch.inference_mode()
     def track(self, images: np.ndarray, object_classes: np.ndarray, held: np.ndarray, previous_actions: np.ndarray,
               state: StreamState) -> tuple[PoseEstimate, StreamState]:
-        """``step`` before calibration and conversion: the model's world-frame estimate (N, 1, ...) of all K slots."""
+        """``step`` before calibration and conversion: the model's world-frame estimate (N, 1, ...) of all K slots,
+        with the PoseNet's visibility logits of this frame (``visibility_logit`` (N, 1, K), None without the head)."""
         previous_actions = np.asarray(previous_actions)
         self._check(images, previous_actions, state.n_envs)
         try:
@@ -142,10 +143,10 @@ class LNetRunner:
         except ValueError as error:
             raise ObservationMismatch(str(error)) from None
         device = self.device
-        _, tracked, memory = self._network(
+        single, tracked, memory = self._network(
             inputs.images.to(device)[:, None], inputs.object_classes.to(device), inputs.held.to(device)[:, None],
             torch.as_tensor(previous_actions, dtype=torch.long, device=device)[:, None], state.memory)
-        return tracked, StreamState(state.n_envs, memory)
+        return replace(tracked, visibility_logit=single.visibility_logit), StreamState(state.n_envs, memory)
 
     @torch.inference_mode()
     def step(self, images: np.ndarray, object_classes: np.ndarray, held: np.ndarray, previous_actions: np.ndarray,
@@ -165,9 +166,10 @@ class LNetRunner:
         environment holds, n or -1 for none), calibrated, as numpy; ``search``: the environments' looks, this frame's
         included, for the search belief's density (None: without it)."""
         n_objects = object_classes.shape[1]
+        visibility = None if tracked.visibility_logit is None else tracked.visibility_logit[:, -1, :n_objects]
         last = PoseEstimate(*(getattr(tracked, name)[:, -1] for name in (
             "agent_mean", "agent_tril", "heading", "kappa")), tracked.object_mean[:, -1, :n_objects],
-            tracked.object_tril[:, -1, :n_objects], frame=tracked.frame)
+            tracked.object_tril[:, -1, :n_objects], frame=tracked.frame, visibility_logit=visibility)
         return stated_estimates(last, object_classes, held, self.fitted.scales, self.fitted.stated, search)
 
 

@@ -102,7 +102,9 @@ class Estimates:
     that an object's belief is lost, the object anywhere in the arena instead (0 unless the calibration fitted it);
     object_searching (N, n) bool the belief has not found its object yet, so its stated belief is the search
     belief; search_density (N, M) the search belief's density (per m^2) at the arena grid's points
-    (``SearchMap.grid``), where the loop keeps the looks and the calibration fitted ``search_find`` (else None).
+    (``SearchMap.grid``), where the loop keeps the looks and the calibration fitted ``search_find`` (else None);
+    object_visible (N, n) the PoseNet's probability that each object is in view on this frame (its visibility head,
+    trained on the simulator's rule ``mor.sim.rules.visible``; None for a model without the head).
     """
 
     agent_mean: np.ndarray
@@ -114,6 +116,7 @@ class Estimates:
     object_lost: np.ndarray
     object_searching: np.ndarray
     search_density: np.ndarray | None = None
+    object_visible: np.ndarray | None = None
 
     def where(self, take_other: np.ndarray, other: Estimates) -> Estimates:
         """Per environment, ``other``'s estimates where ``take_other`` (N,) bool is True, else these."""
@@ -137,12 +140,13 @@ def stated_estimates(last: PoseEstimate, object_classes: np.ndarray, held: np.nd
     mask = confusable(object_classes, held)
     as_numpy = lambda t: t.float().cpu().numpy()  # noqa: E731
     searching = not_found(as_numpy(last.object_tril), params.not_found_sigma)  # judged on the uncalibrated belief
+    visible = None if last.visibility_logit is None else as_numpy(torch.sigmoid(last.visibility_logit))
     last = calibration.apply(last, torch.as_tensor(mask, device=last.agent_mean.device))
     density = None if search is None or params.search_find is None else \
         search.density(params.search_find).astype(np.float32)
     return Estimates(as_numpy(last.agent_mean), _covariance(last.agent_tril), as_numpy(last.heading),
                      as_numpy(last.kappa), as_numpy(last.object_mean), _covariance(last.object_tril),
-                     params.lost(mask).astype(np.float32), searching, density)
+                     params.lost(mask).astype(np.float32), searching, density, visible)
 
 
 @dataclass(frozen=True)

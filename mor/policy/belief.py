@@ -44,6 +44,8 @@ class PoseBelief:
     object_found (N, n) 1.0 where the belief has found its object, 0.0 where it is still the search belief;
     object_lost (N, n) the probability that the object is not where its Gaussian says; search: where the objects
     not found yet may be (``SearchBelief``; a policy reads it through ``mor.policy.search_view``).
+    object_visible (N, n): the probability that each object is in view on this frame, by the L-Net's own detection
+    (``mor.lnet.stated.Estimates.object_visible``; None where the source gives none, as the truth).
     """
 
     agent_mean: Float
@@ -54,6 +56,7 @@ class PoseBelief:
     object_cov: Float
     object_found: Float | None = None
     object_lost: Float | None = None
+    object_visible: Float | None = None
     search: SearchBelief | None = None
 
     @property

@@ -17,6 +17,8 @@ triple is [σ_forward m, σ_left m, correlation] of a covariance rotated into th
 - the stated belief (only where ``layout.search``): each object's found flag and lost probability (2 n), for pick
   the goal object's (2), and the search belief's mass around the agent (``mor.policy.search_view``; S sectors x
   rings, default 8 x 2)
+- the L-Net's detection (only pick, where ``layout.reads_visibility``): each object's probability of being in view
+  on this frame (n) and the goal object's (1)
 
 The rays and the sectors are ``policy.observation`` in ``params.yaml`` (``ObservationParams``); the layout of a
 variant is ``ObservationLayout.of(variant, profile.policy.observation)``.
@@ -48,29 +50,41 @@ SEARCH_FIELDS: tuple[str, ...] = ("search_sectors", "search_ring_edges_m")
 #: the ``ObservationParams`` fields that only a layout with the PICK gate (``gate``) reads; they mask an action and
 #: change no feature, so a policy may warm-start from one trained without them
 GATE_FIELDS: tuple[str, ...] = ("pick_gate_probability",)
+#: the ``ObservationParams`` fields that only an L-Net variant's Pick layout (``visibility``) reads; they add
+#: features under names of their own, so a policy may warm-start from one trained without them (zero weights)
+VISIBILITY_FIELDS: tuple[str, ...] = ("pick_visibility",)
 
 
 @dataclass(frozen=True)
 class ObservationLayout:
     """What a pose policy's vector holds: the uncertainty entries or not, the stated belief's parts or not, and
     the derived features' settings (``features``: the free-space rays, the search sectors); ``gate``: its Pick skill
-    reads the PICK gate (``mor.policy.pick_gate``; only the L-Net's beliefs with uncertainty)."""
+    reads the PICK gate (``mor.policy.pick_gate``; only the L-Net's beliefs with uncertainty); ``visibility``: its
+    Pick skill reads the L-Net's detection where ``features.pick_visibility`` asks (only the L-Net's beliefs)."""
 
     uncertainty: bool = True
     search: bool = False
     features: ObservationParams = field(default_factory=ObservationParams)
     gate: bool = False
+    visibility: bool = False
 
     @classmethod
     def of(cls, variant: Variant, features: ObservationParams) -> ObservationLayout:
         """``variant``'s layout with the profile's ``policy.observation`` settings."""
-        return cls(variant.uncertainty, variant.search, features, variant.uses_lnet and variant.uncertainty)
+        return cls(variant.uncertainty, variant.search, features, variant.uses_lnet and variant.uncertainty,
+                   variant.uses_lnet)
 
     def read_fields(self, task: Task) -> tuple[str, ...]:
-        """The ``ObservationParams`` fields this layout's ``task`` policy reads (the gate's only for pick)."""
-        gated = self.gate and task == "pick"
+        """The ``ObservationParams`` fields this layout's ``task`` policy reads (the gate's and the detection's only
+        for pick)."""
+        gated, detects = self.gate and task == "pick", self.visibility and task == "pick"
         return tuple(name for name in ObservationParams.model_fields
-                     if (self.search or name not in SEARCH_FIELDS) and (gated or name not in GATE_FIELDS))
+                     if (self.search or name not in SEARCH_FIELDS) and (gated or name not in GATE_FIELDS)
+                     and (detects or name not in VISIBILITY_FIELDS))
+
+    def reads_visibility(self, task: Task) -> bool:
+        """Whether this layout's ``task`` vector holds the L-Net's detection (``features.pick_visibility``)."""
+        return self.visibility and task == "pick" and self.features.pick_visibility
 
     def pick_gate_probability(self, task: Task) -> float:
         """The PICK gate's probability for this layout's ``task`` skill (0: no gate)."""
@@ -110,6 +124,8 @@ def feature_names(task: Task, n_objects: int, layout: ObservationLayout) -> list
         names += [f"object{i}_{part}" for i in range(n_objects) for part in ("found", "lost")]
         names += ["goal_found", "goal_lost"] if task == "pick" else []
         names += sector_names(layout.features.search_sectors, layout.features.search_ring_edges_m)
+    if layout.reads_visibility(task):
+        names += [f"object{i}_visible" for i in range(n_objects)] + ["goal_visible"]
     return names
 
 
@@ -174,6 +190,11 @@ def observation_vector(
             parts.append(objects[rows, np.asarray(goal, int).reshape(n_envs)])
     if layout.search:
         parts += _stated(belief, task, goal, layout.features)
+    if layout.reads_visibility(task):
+        if belief.object_visible is None:
+            raise ValueError("policy.observation.pick_visibility: this belief has no detection; the L-Net needs its "
+                             "visibility head (lnet.model.visibility: true), or set pick_visibility: false")
+        parts += [belief.object_visible, belief.object_visible[rows, np.asarray(goal, int).reshape(n_envs)]]
     return np.concatenate([np.asarray(p, np.float32).reshape(n_envs, -1) for p in parts], -1)
 
 

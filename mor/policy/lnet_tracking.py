@@ -34,7 +34,8 @@ def belief_from_estimates(estimates: Estimates, search: SearchMap | None = None)
                       (1.0 / np.maximum(estimates.heading_kappa, 1e-6)).astype(np.float32),
                       estimates.object_mean, estimates.object_cov,
                       object_found=(~estimates.object_searching).astype(np.float32),
-                      object_lost=estimates.object_lost.astype(np.float32), search=searched)
+                      object_lost=estimates.object_lost.astype(np.float32), object_visible=estimates.object_visible,
+                      search=searched)
 
 
 class LNetBatchTracker:

@@ -100,6 +100,10 @@ class ObservationParams(ParamsModel):
                     "only where its belief gives the target at least this probability of lying within reach and "
                     "view; 0: off. Not an observation but an action mask read from it, kept here so that a policy's "
                     "signature records it")
+    pick_visibility: bool = Field(
+        False, description="the Pick skills of the L-Net variants also read the L-Net's detection: each object's and "
+                           "the goal's probability of being in view on this frame (the PoseNet's visibility head, "
+                           "trained on the rule PICK's view follows); false: they do not")
     search_ring_edges_m: list[float] = Field(
         default_factory=lambda: [PICK_RANGE], min_length=1,
         description="metres: the outer radii of the search sectors' range rings, increasing (the last ring is "

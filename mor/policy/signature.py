@@ -9,7 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from mor.atomic import atomic_output
 from mor.errors import ConfigError
-from mor.policy.features import GATE_FIELDS, SEARCH_FIELDS, ObservationLayout, feature_names
+from mor.policy.features import GATE_FIELDS, SEARCH_FIELDS, VISIBILITY_FIELDS, ObservationLayout, feature_names
 from mor.policy.names import Task
 from mor.policy.params import ObservationParams
 from mor.policy.variants import VARIANTS, Variant
@@ -70,11 +70,11 @@ def warm_start_names(path: Path, signature: PolicySignature) -> list[str]:
     """The feature names of the policy whose meta.json is ``path``, for ``signature``'s policy to start from
     (``mor.policy.train.warm_start`` copies weights by name); ConfigError naming the setting where an observation
     setting that both layouts read differs (the same name would carry another quantity; the PICK gate masks an
-    action and changes no feature, so it may differ)."""
+    action and changes no feature, and the L-Net's detection adds features of its own names, so they may differ)."""
     source = read_signature(path)
     both_search = all(VARIANTS[s.variant].search for s in (source, signature) if s.variant in VARIANTS)
     fields = tuple(name for name in ObservationParams.model_fields
-                   if (both_search or name not in SEARCH_FIELDS) and name not in GATE_FIELDS)
+                   if (both_search or name not in SEARCH_FIELDS) and name not in GATE_FIELDS + VISIBILITY_FIELDS)
     _check_features(path, source.features, signature.features, fields)
     return source.observation
 

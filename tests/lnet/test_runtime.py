@@ -66,7 +66,7 @@ def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration(conf
 
     inputs = [env_to_network(f["images"], f["classes"], f["held"]) for f in frames]
     with torch.no_grad():
-        _, tracked, _ = runner.model(torch.stack([i.images for i in inputs], 1), inputs[0].object_classes,
+        single, tracked, _ = runner.model(torch.stack([i.images for i in inputs], 1), inputs[0].object_classes,
                                      torch.stack([i.held for i in inputs], 1),
                                      torch.as_tensor(np.stack([_previous(frames, t) for t in range(5)], 1)))
     assert estimates.object_mean.shape == (3, 2, 2) and estimates.object_cov.shape == (3, 2, 2, 2)
@@ -74,7 +74,12 @@ def test_streaming_steps_equal_the_sequence_model_and_apply_the_calibration(conf
     assert estimates.object_lost.shape == (3, 2) and not estimates.object_lost.any()  # none fitted
     assert estimates.search_density is None  # no looks kept (mor.lnet.streaming keeps them given the arena)
     assert all(v.dtype == np.float32 for k, v in vars(estimates).items()
-               if k not in ("object_searching", "search_density"))
+               if k not in ("object_searching", "search_density") and v is not None)
+    if config.visibility:  # this frame's detection: the PoseNet's visibility head, before any calibration
+        np.testing.assert_allclose(estimates.object_visible,
+                                   torch.sigmoid(single.visibility_logit[:, -1, :2]).numpy(), atol=1e-5)
+    else:
+        assert estimates.object_visible is None
     uncalibrated = tracked.object_tril[:, -1, :2].numpy()  # 'not found' is judged before the calibration's x 0.5
     np.testing.assert_array_equal(estimates.object_searching, not_found(uncalibrated, 1.0))
     np.testing.assert_allclose(estimates.agent_mean, tracked.agent_mean[:, -1].numpy(), atol=1e-5)

@@ -86,6 +86,32 @@ def _runner() -> LNetRunner:
                         "test")
 
 
+def test_an_lnet_pick_skill_reads_the_lnets_detection_only_where_the_profile_asks() -> None:
+    """``pick_visibility`` adds each object's and the goal's in-view probability (the PoseNet's visibility head) to
+    the L-Net variants' Pick vector, and to nothing else."""
+    detecting = ObservationParams(pick_visibility=True)
+    layout = ObservationLayout.of(VARIANTS["lnet"], detecting)
+    plain = feature_names("pick", 2, ObservationLayout.of(VARIANTS["lnet"], ObservationParams()))
+    assert feature_names("pick", 2, layout) == plain + ["object0_visible", "object1_visible", "goal_visible"]
+    for variant, task in (("lnet", "drop"), ("gt_pose", "pick")):  # neither the Drop skill nor the truth's Pick
+        assert feature_names(task, 2, ObservationLayout.of(VARIANTS[variant], detecting)) == feature_names(
+            task, 2, ObservationLayout.of(VARIANTS[variant], ObservationParams()))
+    torch.manual_seed(0)
+    runner = LNetRunner(LNet(LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16, visibility=True)),
+                        FittedCalibration(), 16, "test")
+    env = make_policy_env("pick", SIM, LNetTracker(runner), layout)
+    vector, _ = env.reset(seed=5)
+    for action in (Action.MOVE, Action.TURN_LEFT, Action.MOVE):
+        named = dict(zip(feature_names("pick", 2, layout), vector, strict=True))
+        seen = [named["object0_visible"], named["object1_visible"]]
+        assert all(0.0 < p < 1.0 for p in seen)
+        assert named["goal_visible"] == seen[env.unwrapped.goal_object]
+        vector = env.step(int(action))[0]
+    blind = make_policy_env("pick", SIM, LNetTracker(_runner()), layout)  # an L-Net without the head
+    with pytest.raises(ValueError, match="pick_visibility: this belief has no detection"):
+        blind.reset(seed=5)
+
+
 def test_the_batched_lnet_wrapper_equals_one_tracker_per_env_across_episode_ends() -> None:
     """One forward per vector step (two when an episode is truncated) gives what a per-env tracker gives: a
     truncated episode's terminal observation is its last frame's vector; a terminated one has none (SB3 never

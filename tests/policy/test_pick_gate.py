@@ -3,6 +3,7 @@ gate masks PICK wherever a Pick skill of an L-Net variant with uncertainty meets
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -114,3 +115,21 @@ def test_a_policy_records_its_gate_and_plays_with_it(tmp_path: Path) -> None:
     write_signature(tmp_path / "meta.json", PolicySignature.of("pick", VARIANTS["lnet"], 2, "square", "v",
                                                                ObservationParams()))
     assert warm_start_names(tmp_path / "meta.json", lnet) == lnet.observation
+
+
+def test_a_policy_records_whether_it_reads_the_lnets_detection(tmp_path: Path) -> None:
+    detecting = ObservationParams(pick_visibility=True)
+    lnet = PolicySignature.of("pick", VARIANTS["lnet"], 2, "square", "v", detecting)
+    assert lnet.features.pick_visibility and lnet.observation[-1] == "goal_visible"
+    for task, name in (("drop", "lnet"), ("pick", "gt_pose")):  # only the L-Net variants' Pick skills read it
+        assert not PolicySignature.of(task, VARIANTS[name], 2, "square", "v", detecting).features.pick_visibility
+    old = PolicySignature.of("pick", VARIANTS["lnet"], 2, "square", "v", ObservationParams())
+    write_signature(tmp_path / "meta.json", old)
+    with pytest.raises(ConfigError, match=r"pick_visibility=False but this run needs True"):
+        check_signature(tmp_path / "meta.json", lnet)
+    # a detecting run may start from a policy without it: the new features have names of their own (zero weights)
+    assert warm_start_names(tmp_path / "meta.json", lnet) == old.observation
+    recorded = json.loads((tmp_path / "meta.json").read_text())
+    del recorded["features"]["pick_visibility"]  # a meta.json written before the setting existed still loads
+    (tmp_path / "meta.json").write_text(json.dumps(recorded))
+    check_signature(tmp_path / "meta.json", old)
