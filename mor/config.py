@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Any, Literal, TypeVar
 
 import yaml
-from pydantic import BaseModel, Field, ValidationError
+from pydantic import BaseModel, Field, ValidationError, model_validator
 
 from mor.data.exploration import ExplorationParams
 from mor.errors import ConfigError
@@ -81,6 +81,13 @@ class Profile(ParamsModel):
     evaluate: EvalParams = Field(default_factory=EvalParams)
     robot: RobotParams = Field(default_factory=RobotParams)
     setting: SettingParams | None = None
+
+    @model_validator(mode="after")
+    def _detection_needs_the_visibility_head(self) -> Profile:
+        if self.policy.observation.pick_visibility and not self.lnet.model.visibility:
+            raise ValueError("policy.observation.pick_visibility: true reads the L-Net's visibility head; set "
+                             "lnet.model.visibility: true (a new L-Net) or pick_visibility: false")
+        return self
 
 
 Model = TypeVar("Model", bound=BaseModel)

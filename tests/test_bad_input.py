@@ -172,6 +172,19 @@ def test_bad_params_name_the_file_and_field(tmp_path: Path, section, key, value,
     assert_one_line(error.value, str(path), f"profiles.tiny: {field}")
 
 
+def test_the_lnets_detection_without_its_visibility_head_is_refused_naming_both_settings(tmp_path: Path) -> None:
+    document = yaml.safe_load(_with("policy", "observation", {"pick_visibility": True}))
+    document["profiles"]["tiny"]["lnet"] = {"model": {"visibility": False}}
+    path = write_params(tmp_path, yaml.safe_dump(document))
+    with pytest.raises(ConfigError) as error:
+        load_profile("tiny", path)
+    message = assert_one_line(error.value, str(path), "profiles.tiny: policy.observation.pick_visibility",
+                              "lnet.model.visibility")
+    assert "got" not in message  # a check across fields names them; it does not print the whole profile
+    document["profiles"]["tiny"]["lnet"]["model"]["visibility"] = True
+    assert load_profile("tiny", write_params(tmp_path, yaml.safe_dump(document))).policy.observation.pick_visibility
+
+
 def test_unknown_section(tmp_path: Path) -> None:
     path = write_params(tmp_path, _with("simulator", "n_objects", 3))  # a misspelt section
     with pytest.raises(ConfigError) as error:

@@ -45,7 +45,9 @@ def format_validation_error(error: ValidationError, where: str) -> str:
     prefix = f"{place}: " if place else ""
     if first["type"] == "extra_forbidden":
         return f"{prefix}unknown key; remove it or fix its spelling"
-    return f"{prefix}{first['msg'].removeprefix('Value error, ')} (got {first.get('input')!r})"
+    value = first.get("input")  # a mapping is the model's own input (a missing field, a check across fields): not shown
+    shown = "" if isinstance(value, dict) else f" (got {value!r})"
+    return f"{prefix}{first['msg'].removeprefix('Value error, ')}{shown}"
 
 
 def make_sim_config(where: str = "", **values: object) -> SimConfig:
