@@ -221,7 +221,8 @@ def eval_results(profile: ProfileOption = None) -> None:
 
 
 RowsArgument = Annotated[str, typer.Argument(help="FOLDER:METHOD: the method's rows in a folder of row files, e.g. "
-                                                 "cards/results/rows:lnet (every training run's).")]
+                                                 "cards/results/rows:lnet (every training run's on the protocol's episodes; "
+                                                 "lnet.held_out: on held-out ones).")]
 
 
 @eval_app.command("compare")

@@ -20,7 +20,7 @@ from mor.eval.methods import METHODS, Method, load_method, method_spec
 from mor.eval.policy_card import write_policy_card
 from mor.eval.protocol import (EpisodeKey, decider, method_inputs, metric_summaries, metric_values, play_job,
                                run_protocol, sim_of)
-from mor.eval.results import ROW_KEYS, comparisons, gather_rows, is_zero_shot, stale_row
+from mor.eval.results import ROW_KEYS, comparisons, gather_rows, is_zero_shot, row_name, stale_row
 from mor.eval.tables import localisation_headline
 from mor.eval.video import write_policy_video
 from mor.locking import writer_lock
@@ -43,8 +43,7 @@ def run(profile: Profile, profile_name: str, method_name: str, progress: bool = 
     seeds are not the protocol's (``mor eval run --seeds``): ``.held_out`` is added, and the row says
     ``episodes: held_out``."""
     method = method_spec(method_name)
-    name = ((f"{method.name}_zero_shot" if zero_shot else method.name)
-            + (f".seed_{training_seed}" if training_seed else "") + (".held_out" if held_out else ""))
+    name = row_name(f"{method.name}_zero_shot" if zero_shot else method.name, training_seed, held_out)
     command = (f"mor eval run --method {method.name}" + (" --zero-shot" if zero_shot else "")
                + (f" --training-seed {training_seed}" if training_seed else "")
                + (f" --seeds {','.join(map(str, profile.evaluate.seeds))}" if held_out else ""))

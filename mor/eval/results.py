@@ -23,6 +23,16 @@ from mor.policy.workspace import Workspace
 ROW_KEYS = ("method", "encoder", "arena", "policy_arena", "n_objects", "episodes")
 
 
+#: the suffix of a row's name (and of its records') on held-out episodes
+HELD_OUT = ".held_out"
+
+
+def row_name(method: str, training_seed: int = 0, held_out: bool = False) -> str:
+    """The name of a row's file and of its records: ``method``, with ``.seed_S`` for a training seed S > 0 and
+    ``.held_out`` for held-out evaluation seeds (``mor eval run --seeds``)."""
+    return method + (f".seed_{training_seed}" if training_seed else "") + (HELD_OUT if held_out else "")
+
+
 def is_zero_shot(row: dict[str, Any]) -> bool:
     """A row of ``mor eval run --zero-shot``: policies trained in another arena (the main workspace's) played here."""
     return row["arena"] != row["policy_arena"]
@@ -174,10 +184,15 @@ def compare(row_a: dict[str, Any], row_b: dict[str, Any], resamples: int = 10_00
 
 def method_row(folder: Path, method: str, resamples: int = 10_000) -> dict[str, Any]:
     """``method``'s protocol row from the row files in ``folder`` (``method.json`` and ``method.seed_S.json``,
-    aggregated over its training runs); ConfigError naming the folder when it holds none."""
-    files = [folder / f"{method}.json", *sorted(folder.glob(f"{method}.seed_*.json"))]
-    rows = [json.loads(path.read_text()) for path in files if path.is_file()]
+    aggregated over its training runs), or, where ``method`` ends in ``.held_out``, its row on held-out episodes
+    (``row_name``'s ``.held_out`` files); ConfigError naming the folder when it holds none."""
+    base = method.removesuffix(HELD_OUT)
+    held_out = base != method
+    files = [folder / f"{row_name(base, 0, held_out)}.json", *sorted(folder.glob(f"{base}.seed_*.json"))]
+    rows = [row for row in (json.loads(path.read_text()) for path in files if path.is_file())
+            if (row.get("episodes") == "held_out") == held_out]
     if not rows:
-        raise ConfigError(f"{folder}: no row of {method!r} ({method}.json or {method}.seed_S.json); run mor eval run "
-                          f"--method {method} first")
+        raise ConfigError(f"{folder}: no row of {method!r} ({row_name(base, 0, held_out)}.json or "
+                          f"{row_name(base, 1, held_out).replace('seed_1', 'seed_S')}.json); run mor eval run "
+                          f"--method {base}{' --seeds ...' if held_out else ''} first")
     return aggregate_runs(rows, resamples)[0]

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mor.errors import ConfigError
-from mor.eval.results import aggregate_runs, comparisons
+from mor.eval.results import aggregate_runs, comparisons, method_row, row_name
 from mor.eval.stats import probability_of_improvement, summarize_runs
 
 METRICS = ("pick_success", "drop_success", "rearrange_success", "fixed_strict", "energy_remaining")
@@ -73,6 +73,23 @@ def test_a_held_out_row_is_not_compared_in_place_of_the_protocol_row() -> None:
     found = {c["metric"]: c for c in comparisons(rows, 500)}
     assert found["pick_success"]["training_seeds"]["lnet"] == [0, 1, 2]
     assert found["pick_success"]["verdict"] == "no evidence"
+
+
+def test_a_folders_protocol_and_held_out_rows_are_each_aggregated_over_their_own_runs(tmp_path) -> None:
+    import json
+
+    for seed in range(3):
+        (tmp_path / f"{row_name('lnet', seed)}.json").write_text(json.dumps(_row("lnet", seed, 0.9)))
+        held_out = {**_row("lnet", seed, 0.1), "episodes": "held_out"}
+        (tmp_path / f"{row_name('lnet', seed, held_out=True)}.json").write_text(json.dumps(held_out))
+    assert sorted(p.name for p in tmp_path.iterdir())[:2] == ["lnet.held_out.json", "lnet.json"]
+    protocol, held = method_row(tmp_path, "lnet", 200), method_row(tmp_path, "lnet.held_out", 200)
+    assert protocol["training_seeds"] == held["training_seeds"] == [0, 1, 2]
+    assert protocol.get("episodes") is None and held["episodes"] == "held_out"
+    assert protocol["metrics"]["pick_success"]["mean"] > 0.7 > 0.3 > held["metrics"]["pick_success"]["mean"]
+    with pytest.raises(ConfigError, match=r"no row of 'lnet_search.held_out' \(lnet_search.held_out.json or "
+                                          r"lnet_search.seed_S.held_out.json\); run mor eval run --method lnet_search"):
+        method_row(tmp_path, "lnet_search.held_out", 200)
 
 
 def test_the_card_says_where_a_compared_pair_trained_for_different_steps() -> None:
