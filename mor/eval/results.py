@@ -192,7 +192,7 @@ def method_row(folder: Path, method: str, resamples: int = 10_000) -> dict[str, 
     rows = [row for row in (json.loads(path.read_text()) for path in files if path.is_file())
             if (row.get("episodes") == "held_out") == held_out]
     if not rows:
-        raise ConfigError(f"{folder}: no row of {method!r} ({row_name(base, 0, held_out)}.json or "
-                          f"{row_name(base, 1, held_out).replace('seed_1', 'seed_S')}.json); run mor eval run "
-                          f"--method {base}{' --seeds ...' if held_out else ''} first")
+        suffix = HELD_OUT if held_out else ""
+        raise ConfigError(f"{folder}: no row of {method!r} ({base}{suffix}.json or {base}.seed_S{suffix}.json); run "
+                          f"mor eval run --method {base}{' --seeds ...' if held_out else ''} first")
     return aggregate_runs(rows, resamples)[0]

@@ -168,12 +168,12 @@ def observation_vector(
     """
     n_envs, n = belief.n_envs, belief.n_objects
     rows = np.arange(n_envs)
+    index = np.asarray(goal, int).reshape(n_envs) if task == "pick" else None  # the goal object's, (N,)
     parts = [belief.agent_mean, np.cos(belief.heading)[:, None], np.sin(belief.heading)[:, None],
              np.concatenate([belief.object_mean, _polar(belief, belief.object_mean)], -1).reshape(n_envs, -1),
              np.eye(n + 1, dtype=np.float32)[np.asarray(held, int)],
              clearance(belief, held, arena, layout.features.clearance_rays_deg, layout.features.clearance_max_m)]
     if task == "pick":
-        index = np.asarray(goal, int).reshape(n_envs)
         parts += [np.eye(n, dtype=np.float32)[index], _polar(belief, belief.object_mean[rows, index])]
     elif task == "drop":
         position = np.asarray(goal, np.float32).reshape(n_envs, 2)
@@ -187,14 +187,14 @@ def observation_vector(
         objects = _ego_uncertainty(belief.object_cov, belief.heading)
         parts += [_ego_uncertainty(belief.agent_cov, belief.heading), heading_sigma, objects.reshape(n_envs, -1)]
         if task == "pick":
-            parts.append(objects[rows, np.asarray(goal, int).reshape(n_envs)])
+            parts.append(objects[rows, index])
     if layout.search:
         parts += _stated(belief, task, goal, layout.features)
     if layout.reads_visibility(task):
         if belief.object_visible is None:
             raise ValueError("policy.observation.pick_visibility: this belief has no detection; the L-Net needs its "
                              "visibility head (lnet.model.visibility: true), or set pick_visibility: false")
-        parts += [belief.object_visible, belief.object_visible[rows, np.asarray(goal, int).reshape(n_envs)]]
+        parts += [belief.object_visible, belief.object_visible[rows, index]]
     return np.concatenate([np.asarray(p, np.float32).reshape(n_envs, -1) for p in parts], -1)
 
 
