@@ -108,14 +108,16 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
         run_dir = policy_folder(paths.POLICIES, variant.name, task, seed)
         if more_steps is not None:  # not the original run's folder, whose finished checkpoint would be resumed
             run_dir = run_dir.with_name(f"{task}.more_{more_steps}")
+        extractor = baseline_extractor(policy.baseline, task) if variant.is_baseline else None
         summary = train_policy(
             lambda: make_training_env(task, variant, sim, params, policy.observation, runner, skills),  # noqa: B023
             params, signature, run_dir, seed, f"{variant.name} {task}" + (f" seed {seed}" if seed else ""),
-            progress, init_from, policy_kwargs=baseline_extractor(policy.baseline) if variant.is_baseline else None,
+            progress, init_from, policy_kwargs=extractor,
             initialize=_baseline_start(profile, variant, task, params, seed, run_dir, pretrained, progress)
             if variant.is_baseline else None,
-            recipe={"encoder": policy.baseline.encoder, "imitation": policy.baseline.imitation.model_dump()}
-            if variant.is_baseline else None)
+            recipe={"encoder": policy.baseline.encoder, "imitation": policy.baseline.imitation.model_dump(),
+                    "goal_gating": extractor["features_extractor_kwargs"]["goal_gating"]}
+            if extractor is not None else None)
         publish(run_dir, policy_folder(paths.POLICY_CARD, variant.name, task, seed))
         summaries.append(summary)
     return summaries

@@ -88,12 +88,20 @@ class ResNetEncoder(nn.Module):
         self.channels = self.backbone.fc.in_features  # of the last stage's map: 512 (ResNet18) or 2048 (ResNet50)
         self.backbone.fc = nn.Sequential(nn.Linear(self.channels, feature_dim), nn.ReLU())
 
-    def encode(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(N, 3, H, W) -> features (N, D) and the last stage's map resampled to 4x4, (N, channels, 4, 4)."""
+    def last_map(self, images: torch.Tensor) -> torch.Tensor:
+        """(N, 3, H, W) -> the last stage's map (N, channels, H/32, W/32)."""
         net = self.backbone
         stem = net.maxpool(net.relu(net.bn1(net.conv1(images))))
-        last = net.layer4(net.layer3(net.layer2(net.layer1(stem))))
-        return net.fc(net.avgpool(last).flatten(1)), nn.functional.adaptive_avg_pool2d(last, 4)
+        return net.layer4(net.layer3(net.layer2(net.layer1(stem))))
+
+    def pool(self, last: torch.Tensor) -> torch.Tensor:
+        """The last stage's map (N, channels, h, w) -> features (N, D): average pool, then the linear layer."""
+        return self.backbone.fc(self.backbone.avgpool(last).flatten(1))
+
+    def encode(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(N, 3, H, W) -> features (N, D) and the last stage's map resampled to 4x4, (N, channels, 4, 4)."""
+        last = self.last_map(images)
+        return self.pool(last), nn.functional.adaptive_avg_pool2d(last, 4)
 
     def forward(self, images: torch.Tensor) -> torch.Tensor:
         return self.encode(images)[0]

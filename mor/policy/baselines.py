@@ -35,7 +35,7 @@ from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, NatureCNN
 
 from mor.errors import ConfigError
-from mor.lnet.model import build_encoder
+from mor.lnet.model import CompactEncoder, ResNetEncoder, build_encoder
 from mor.policy.frame_encoder import frame_encoder, read_frame_autoencoder
 from mor.policy.names import Task
 from mor.policy.params import BaselineParams
@@ -137,10 +137,16 @@ class BaselineExtractor(BaseFeaturesExtractor):
     """The image through the encoder -> (N, image_features); every other key flattened (SB3 one-hot encodes
     ``goal_class``, so the policy's first linear layer is the class embedding) and concatenated after it.
     ``autoencoder``: the frozen ``frame_encoder`` with ``latent_channels``, its code flattened to
-    image_features = latent_channels x H/8 x W/8 (the ``image_features`` argument is not used)."""
+    image_features = latent_channels x H/8 x W/8 (the ``image_features`` argument is not used).
+
+    ``goal_gating``: Gated-Attention (Chaplot et al., "Gated-Attention Architectures for Task-Oriented Language
+    Grounding", AAAI 2018): a linear map of the one-hot ``goal_class`` through a sigmoid scales each channel of the
+    encoder's last feature map before the encoder's own pooling or projection, so that the goal can select the
+    features of its class while they still have their place in the frame (a frozen encoder's code is gated too:
+    the gate is trained)."""
 
     def __init__(self, observation_space: spaces.Dict, encoder: BaselineEncoder = "compact",
-                 image_features: int = 256, latent_channels: int = 16) -> None:
+                 image_features: int = 256, latent_channels: int = 16, goal_gating: bool = False) -> None:
         others = sum(spaces.flatdim(space) for key, space in observation_space.spaces.items() if key != "image")
         _, height, width = observation_space["image"].shape
         if encoder == "autoencoder":
@@ -157,19 +163,59 @@ class BaselineExtractor(BaseFeaturesExtractor):
         else:
             self.encoder = build_encoder(encoder, image_features)
         self.keys = [key for key in observation_space.spaces if key != "image"]
+        self.gate = (torch.nn.Linear(spaces.flatdim(observation_space["goal_class"]), map_channels(self.encoder))
+                     if goal_gating else None)
 
     def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
         """observations: image (N, 3, H, W) scaled to [0, 1] by SB3, the rest (N, ...) -> (N, features_dim)."""
-        parts = [self.encoder(observations["image"])] + [observations[key].flatten(1) for key in self.keys]
-        return torch.cat(parts, dim=1)
+        image = observations["image"]
+        if self.gate is None:
+            encoded = self.encoder(image)
+        else:
+            gate = torch.sigmoid(self.gate(observations["goal_class"]))[..., None, None]
+            encoded = pool_map(self.encoder, last_map(self.encoder, image) * gate)
+        return torch.cat([encoded] + [observations[key].flatten(1) for key in self.keys], dim=1)
 
 
-def baseline_extractor(settings: BaselineParams) -> dict[str, Any]:
-    """SB3 ``policy_kwargs`` of a baseline skill: ``BaselineExtractor`` with the profile's encoder and width, one for
-    the actor and the critic or one each (``settings.share_encoder``)."""
+def last_map(encoder: torch.nn.Module, images: torch.Tensor) -> torch.Tensor:
+    """A baseline encoder's last feature map: images (N, 3, H, W) in [0, 1] -> (N, ``map_channels``, h, w)."""
+    if isinstance(encoder, NatureCNN):
+        return encoder.cnn[:-1](images)  # every layer but the flatten
+    if isinstance(encoder, CompactEncoder):
+        return encoder.features[:-1](images)  # the 4x4 map, before the flatten
+    if isinstance(encoder, ResNetEncoder):
+        return encoder.last_map(images)
+    return encoder[0](images)  # the autoencoder's code
+
+
+def pool_map(encoder: torch.nn.Module, spatial: torch.Tensor) -> torch.Tensor:
+    """What a baseline encoder does after ``last_map``: (N, C, h, w) -> its image features (N, D)."""
+    if isinstance(encoder, NatureCNN):
+        return encoder.linear(spatial.flatten(1))
+    if isinstance(encoder, CompactEncoder):
+        return encoder.project(spatial.flatten(1))
+    if isinstance(encoder, ResNetEncoder):
+        return encoder.pool(spatial)
+    return encoder[1](spatial)
+
+
+def map_channels(encoder: torch.nn.Module) -> int:
+    """The channels of a baseline encoder's ``last_map``."""
+    if isinstance(encoder, NatureCNN):
+        return encoder.cnn[-3].out_channels  # the last convolution's
+    if isinstance(encoder, CompactEncoder | ResNetEncoder):
+        return encoder.channels
+    return encoder[0][-1].out_channels  # the autoencoder's 1x1 code convolution
+
+
+def baseline_extractor(settings: BaselineParams, task: Task) -> dict[str, Any]:
+    """SB3 ``policy_kwargs`` of a baseline ``task`` skill: ``BaselineExtractor`` with the profile's encoder and width,
+    one for the actor and the critic or one each (``settings.share_encoder``); the Pick skill's gated by its
+    target's class where ``settings.goal_gating`` (Drop's goal is a position: never)."""
     return {"features_extractor_class": BaselineExtractor, "share_features_extractor": settings.share_encoder,
             "features_extractor_kwargs": {"encoder": settings.encoder, "image_features": settings.image_features,
-                                          "latent_channels": settings.pretrain.latent_channels}}
+                                          "latent_channels": settings.pretrain.latent_channels,
+                                          "goal_gating": settings.goal_gating and task == "pick"}}
 
 
 def load_pretrained_encoder(path: Path) -> Callable[[torch.nn.Module], None]:

@@ -77,6 +77,9 @@ class BaselineParams(ParamsModel):
     image_features: int = Field(256, ge=8, description="the encoder's output width (autoencoder: its code's size)")
     share_encoder: bool = Field(True, description="the actor and the critic read one encoder (SB3's default), or each "
                                                   "its own, so that the value loss cannot move the actor's features")
+    goal_gating: bool = Field(False, description="the Pick skill's encoder map is gated by its target's class "
+                                                 "(Gated-Attention, mor.policy.baselines.BaselineExtractor); false: "
+                                                 "the class is only concatenated after the encoder, as the paper's")
     pretrain: EncoderPretrainParams = Field(default_factory=EncoderPretrainParams)
     imitation: ImitationParams = Field(default_factory=ImitationParams)
     pick: PPOParams = Field(default_factory=PPOParams)

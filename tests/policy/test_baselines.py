@@ -11,10 +11,11 @@ from mor.data.exploration import ExplorationParams
 from mor.errors import ConfigError
 from mor.eval.methods import METHODS
 from mor.eval.protocol import decider, sim_of
-from mor.policy.baselines import BaselineExtractor, BaselineObservation, baseline_inputs, load_pretrained_encoder
+from mor.policy.baselines import (BaselineExtractor, BaselineObservation, baseline_extractor, baseline_inputs,
+                                  load_pretrained_encoder)
 from mor.policy.envs import make_task_env
 from mor.policy.frame_encoder import frame_autoencoder, pretrain_autoencoder, sample_frames, save_frame_autoencoder
-from mor.policy.params import EncoderPretrainParams, ObservationParams
+from mor.policy.params import BaselineParams, EncoderPretrainParams, ObservationParams
 from mor.policy.signature import PolicySignature
 from mor.policy.variants import VARIANTS
 from mor.sim.config import SimConfig
@@ -74,6 +75,38 @@ def test_the_extractor_concatenates_image_features_and_the_one_hot_goal(encoder:
     features = extractor(preprocess_obs(batch, env.observation_space))
     assert features.shape == (1, 32 + 24 + 2 + 3) == (1, extractor.features_dim)
     env.close()
+
+
+@pytest.mark.parametrize("encoder", ["compact", "nature_cnn", "resnet18", "autoencoder"])
+def test_a_goal_gated_encoder_is_the_encoder_split_at_its_last_map_and_reads_the_goal(encoder: str) -> None:
+    sim = SimConfig(n_objects=3, image_size=48)
+    env = BaselineObservation(make_task_env("pick", sim, render_frames=True), "img")
+    observation, _ = env.reset(seed=0)
+    torch.manual_seed(0)
+    plain = BaselineExtractor(env.observation_space, encoder, image_features=32, latent_channels=4)
+    gated = BaselineExtractor(env.observation_space, encoder, image_features=32, latent_channels=4, goal_gating=True)
+    assert plain.gate is None and not any(key.startswith("gate") for key in plain.state_dict())
+    gated.load_state_dict({**gated.state_dict(), **plain.state_dict()})
+    gated.eval(), plain.eval()
+    batch = preprocess_obs({key: torch.as_tensor(np.asarray(value)[None]) for key, value in observation.items()},
+                           env.observation_space)
+    with torch.no_grad():
+        torch.nn.init.zeros_(gated.gate.weight)
+        torch.nn.init.constant_(gated.gate.bias, 30.0)  # every gate open: the encoder as it is
+        assert torch.allclose(gated(batch), plain(batch), atol=1e-5)
+        torch.nn.init.normal_(gated.gate.weight), torch.nn.init.zeros_(gated.gate.bias)
+        other = {**batch, "goal_class": batch["goal_class"].roll(1, dims=1)}
+        width = gated.features_dim - 24
+        assert not torch.allclose(gated(batch)[:, :width], gated(other)[:, :width])
+        assert torch.equal(plain(batch)[:, :width], plain(other)[:, :width])
+    env.close()
+
+
+def test_only_the_pick_skill_is_gated() -> None:
+    settings = BaselineParams(goal_gating=True)
+    assert baseline_extractor(settings, "pick")["features_extractor_kwargs"]["goal_gating"]
+    assert not baseline_extractor(settings, "drop")["features_extractor_kwargs"]["goal_gating"]
+    assert not baseline_extractor(BaselineParams(), "pick")["features_extractor_kwargs"]["goal_gating"]
 
 
 def test_only_baseline_img_trains_a_pick_and_the_signature_names_the_inputs() -> None:

@@ -30,7 +30,7 @@ def baseline_envs(task: str, n: int = 2) -> DummyVecEnv:
 
 def new_policy(env: DummyVecEnv, seed: int = 0) -> torch.nn.Module:
     torch.set_num_threads(1)
-    kwargs = baseline_extractor(BaselineParams(encoder="compact", image_features=16))
+    kwargs = baseline_extractor(BaselineParams(encoder="compact", image_features=16), "pick")
     return MaskablePPO("MultiInputPolicy", env, seed=seed, n_steps=8, batch_size=8,
                        policy_kwargs={"net_arch": [16, 16], **kwargs}).policy
 
@@ -148,7 +148,7 @@ def _no_bar() -> object:
 def test_a_saved_baseline_acts_as_it_did_whether_or_not_its_critic_has_its_own_encoder(tmp_path: Path,
                                                                                       share: bool) -> None:
     env = baseline_envs("pick", n=1)
-    kwargs = baseline_extractor(BaselineParams(encoder="compact", image_features=16, share_encoder=share))
+    kwargs = baseline_extractor(BaselineParams(encoder="compact", image_features=16, share_encoder=share), "pick")
     policy = MaskablePPO("MultiInputPolicy", env, seed=0, policy_kwargs={"net_arch": [16], **kwargs}).policy
     save_policy_file(policy, tmp_path / "policy.pth")
     loaded = load_policy_file(tmp_path / "policy.pth")
