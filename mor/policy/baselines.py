@@ -172,7 +172,8 @@ class BaselineExtractor(BaseFeaturesExtractor):
         if self.gate is None:
             encoded = self.encoder(image)
         else:
-            gate = torch.sigmoid(self.gate(observations["goal_class"]))[..., None, None]
+            # flattened: the rollout buffer keeps a Discrete as (N, 1), which SB3 one-hot encodes to (N, 1, classes)
+            gate = torch.sigmoid(self.gate(observations["goal_class"].flatten(1)))[..., None, None]
             encoded = pool_map(self.encoder, last_map(self.encoder, image) * gate)
         return torch.cat([encoded] + [observations[key].flatten(1) for key in self.keys], dim=1)
 

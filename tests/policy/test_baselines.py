@@ -99,6 +99,9 @@ def test_a_goal_gated_encoder_is_the_encoder_split_at_its_last_map_and_reads_the
         width = gated.features_dim - 24
         assert not torch.allclose(gated(batch)[:, :width], gated(other)[:, :width])
         assert torch.equal(plain(batch)[:, :width], plain(other)[:, :width])
+        pair = {key: torch.as_tensor(np.stack([value, value])) for key, value in observation.items()}
+        stored = preprocess_obs({**pair, "goal_class": pair["goal_class"][:, None]}, env.observation_space)
+        assert torch.allclose(gated(stored), gated(batch).repeat(2, 1), atol=1e-6)  # as PPO's rollout buffer keeps a Discrete: (N, 1)
     env.close()
 
 
