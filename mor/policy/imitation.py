@@ -95,21 +95,24 @@ class LabelBuffer:
 
 class Expert:
     """The labels' source for one env: ``mor.sim.oracle.Oracle``, which reads the true state. With ``look_first``,
-    in Pick it first turns left on the spot until the target is in view (at most ``FULL_TURN`` turns), as a policy
-    that sees only its frame must search; from then on, or after a full turn that did not show it, it is the oracle.
-    (The oracle alone turns at once towards a target out of view, which no frame tells.)"""
+    in Pick it first turns left on the spot until the target is in view, as a policy that sees only its frame must
+    search; from then on it is the oracle. With ``search_again`` as well, it turns left again whenever the target
+    is out of view later in the episode, since a policy that sees only this frame cannot know where the target went
+    (the oracle turns towards it). Either way it searches for at most ``FULL_TURN`` turns in an episode in all: a
+    target that a full turn did not show is hidden from here, and the oracle drives. (The oracle alone turns at once
+    towards a target out of view, which no frame tells.)"""
 
     FULL_TURN = 36  # TURN_LEFT steps of 10 degrees
 
-    def __init__(self, env: gym.Env, look_first: bool) -> None:
+    def __init__(self, env: gym.Env, look_first: bool, search_again: bool = False) -> None:
         base = env.unwrapped
-        self.oracle, self.look_first = Oracle(base.arena, base.noise), look_first
-        self.turns, self.searching = 0, look_first
+        self.oracle, self.look_first, self.search_again = Oracle(base.arena, base.noise), look_first, search_again
+        self.turns, self.seen = 0, False
 
     def reset(self) -> None:
         """A new episode begins."""
         self.oracle.reset()
-        self.turns, self.searching = 0, self.look_first
+        self.turns, self.seen = 0, False
 
     def act(self, env: gym.Env) -> int:
         """The next action in ``env``'s current state (Pick: towards its goal object; Drop: its target)."""
@@ -118,9 +121,10 @@ class Expert:
             return self.oracle.drop(base.state, base.goal_position)
         if not isinstance(base, PickEnv):
             raise TypeError(f"imitation clones Pick or Drop skills, not {type(base).__name__}")
-        if self.searching and (visible(base.state, base.goal_object) or self.turns >= self.FULL_TURN):
-            self.searching = False
-        if self.searching:
+        in_view = visible(base.state, base.goal_object)
+        self.seen |= in_view
+        if (self.look_first and not in_view and self.turns < self.FULL_TURN
+                and (self.search_again or not self.seen)):
             self.turns += 1
             return int(Action.TURN_LEFT)
         return self.oracle.pick(base.state, base.goal_object)
@@ -221,7 +225,7 @@ def clone_oracle(policy: MaskableActorCriticPolicy, env: DummyVecEnv, settings: 
     """Train ``policy`` to imitate the ``Expert`` on ``env`` (in-process Pick or Drop envs seen as the policy sees
     them): ``settings.rounds`` rounds for the actor, one for the critic (module docstring); the rounds' rows, also
     written to ``log_path``."""
-    experts = [Expert(wrapped, settings.look_first) for wrapped in env.envs]
+    experts = [Expert(wrapped, settings.look_first, settings.search_again) for wrapped in env.envs]
     generator = torch.Generator().manual_seed(seed)
     round_seeds = np.random.SeedSequence([seed, 7919]).generate_state(settings.rounds + 1)
     buffer = LabelBuffer(settings.rounds * env.num_envs * -(-settings.round_steps // env.num_envs))

@@ -65,6 +65,9 @@ class ImitationParams(ParamsModel):
     learning_rate: float = Field(3e-4, gt=0, description="Adam's")
     look_first: bool = Field(True, description="Pick's expert turns on the spot until the target is in view before "
                                                "it follows the oracle (mor.policy.imitation.Expert)")
+    search_again: bool = Field(False, description="with look_first, Pick's expert also turns on the spot whenever the "
+                                                  "target is out of view later in the episode (at most a full turn "
+                                                  "in an episode in all); false: only until it first sees it")
 
 
 class BaselineParams(ParamsModel):

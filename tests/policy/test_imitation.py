@@ -117,6 +117,28 @@ def test_the_pick_expert_looks_for_the_target_before_it_follows_the_oracle() -> 
     env.close()
 
 
+def test_the_pick_expert_that_searches_again_turns_left_whenever_the_target_leaves_the_view() -> None:
+    env = baseline_envs("pick", n=1)
+    for seed in range(20):
+        env.seed(seed)
+        env.reset()
+        base = env.envs[0].unwrapped
+        if visible(base.state, base.goal_object):
+            break
+    wrapped, oracle = env.envs[0], Oracle(base.arena, base.noise)
+    again, once = Expert(wrapped, look_first=True, search_again=True), Expert(wrapped, look_first=True)
+    assert again.act(wrapped) == once.act(wrapped) == oracle.pick(base.state, base.goal_object)  # seen at once
+    while visible(base.state, base.goal_object):
+        env.step(np.array([Action.TURN_RIGHT]))
+    assert again.act(wrapped) == Action.TURN_LEFT
+    assert once.act(wrapped) == oracle.pick(base.state, base.goal_object)
+    again.turns = Expert.FULL_TURN  # a full turn spent searching in this episode: the oracle drives
+    assert again.act(wrapped) == oracle.pick(base.state, base.goal_object)
+    again.reset()
+    assert again.act(wrapped) == Action.TURN_LEFT
+    env.close()
+
+
 def test_clone_oracle_logs_its_rounds_and_repeats_itself_with_the_same_seed(tmp_path: Path) -> None:
     settings = ImitationParams(rounds=2, round_steps=16, epochs=1, batch_size=8)
     weights = []
