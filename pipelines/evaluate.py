@@ -85,10 +85,12 @@ def _evaluate(profile: Profile, profile_name: str, method: Method, name: str, pr
 
 def baseline_recipe(summaries: dict[str, dict[str, Any]], profile: Profile) -> str:
     """How a baseline's skills were made, as its row and tables name it: their encoder (the profile's, for policies
-    whose summary predates the field), and "+ oracle DAgger" where a skill imitated the oracle before PPO."""
+    whose summary predates the field), "+ goal gate" where a skill's encoder was gated by its target's class, and
+    "+ oracle DAgger" where a skill imitated the oracle before PPO."""
     encoders = {summary.get("encoder", profile.policy.baseline.encoder) for summary in summaries.values()}
+    gated = any(summary.get("goal_gating", False) for summary in summaries.values())
     imitated = any(summary.get("imitation", {}).get("rounds", 0) for summary in summaries.values())
-    return " / ".join(sorted(encoders)) + (" + oracle DAgger" if imitated else "")
+    return " / ".join(sorted(encoders)) + (" + goal gate" if gated else "") + (" + oracle DAgger" if imitated else "")
 
 
 def policy_video(profile: Profile, method_name: str, seed: int, out: Path) -> dict[str, float]:

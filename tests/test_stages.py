@@ -219,10 +219,10 @@ def test_baseline_stages_train_evaluate_and_fill_table_1(workspace: Path) -> Non
     _run("eval", "results", "--profile", "tiny")
     row = json.loads((workspace / "cards/results/results.json").read_text())["rows"][0]
     assert tiny["policy"]["baseline"]["imitation"]["rounds"] > 0  # the tiny profile's skills imitate first
-    assert row["method"] == "baseline_landmark" and row["encoder"] == "compact + oracle DAgger"
+    assert row["method"] == "baseline_landmark" and row["encoder"] == "compact + goal gate + oracle DAgger"
     assert row["train_steps"] == {"pick": 64, "drop": 64}
     readme = (workspace / "cards/results/README.md").read_text()
-    assert "| Baseline: CNN + Landmark (paper: ResNet18 + Landmark) [ours: compact + oracle DAgger] |" in readme
+    assert "| Baseline: CNN + Landmark (paper: ResNet18 + Landmark) [ours: compact + goal gate + oracle DAgger] |" in readme
     compute = json.loads((workspace / "cards/results/compute.json").read_text())
     assert set(compute["stages"]) == {"policy train baseline_img pick", "policy train baseline_img drop",
                                       "policy train baseline_landmark drop", "eval run baseline_landmark"}

@@ -20,6 +20,7 @@ from mor.policy.policy_file import load_policy_file, save_policy_file
 from mor.sim.config import SimConfig
 from mor.sim.oracle import Oracle
 from mor.sim.rules import Action, visible
+from mor.sim.tasks import PickEnv
 
 SIM = SimConfig(n_objects=3, image_size=32)
 
@@ -98,14 +99,20 @@ def test_the_label_buffer_keeps_every_round_in_order_and_refuses_to_overflow() -
         buffer.add(part(5, 1))
 
 
-def test_the_pick_expert_looks_for_the_target_before_it_follows_the_oracle() -> None:
+def pick_env_where_the_target_is(in_view: bool) -> tuple[DummyVecEnv, PickEnv]:
+    """One baseline Pick env reset with the first seed whose target starts in view (or out of view)."""
     env = baseline_envs("pick", n=1)
     for seed in range(20):
         env.seed(seed)
         env.reset()
         base = env.envs[0].unwrapped
-        if not visible(base.state, base.goal_object):
-            break
+        if visible(base.state, base.goal_object) == in_view:
+            return env, base
+    raise AssertionError(f"no seed below 20 starts with the target {'in' if in_view else 'out of'} view")
+
+
+def test_the_pick_expert_looks_for_the_target_before_it_follows_the_oracle() -> None:
+    env, base = pick_env_where_the_target_is(in_view=False)
     expert, oracle = Expert(env.envs[0], look_first=True), Oracle(base.arena, base.noise)
     turns = 0
     while not visible(base.state, base.goal_object) and turns < Expert.FULL_TURN:
@@ -118,13 +125,7 @@ def test_the_pick_expert_looks_for_the_target_before_it_follows_the_oracle() -> 
 
 
 def test_the_pick_expert_that_searches_again_turns_left_whenever_the_target_leaves_the_view() -> None:
-    env = baseline_envs("pick", n=1)
-    for seed in range(20):
-        env.seed(seed)
-        env.reset()
-        base = env.envs[0].unwrapped
-        if visible(base.state, base.goal_object):
-            break
+    env, base = pick_env_where_the_target_is(in_view=True)
     wrapped, oracle = env.envs[0], Oracle(base.arena, base.noise)
     again, once = Expert(wrapped, look_first=True, search_again=True), Expert(wrapped, look_first=True)
     assert again.act(wrapped) == once.act(wrapped) == oracle.pick(base.state, base.goal_object)  # seen at once
