@@ -115,7 +115,8 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
             progress, init_from, policy_kwargs=extractor,
             initialize=_baseline_start(profile, variant, task, params, seed, run_dir, pretrained, progress)
             if variant.is_baseline else None,
-            recipe={"encoder": policy.baseline.encoder, "imitation": policy.baseline.imitation.model_dump(),
+            recipe={"encoder": policy.baseline.encoder,
+                    "imitation": getattr(policy.baseline.imitation, task).model_dump(),
                     "goal_gating": extractor["features_extractor_kwargs"]["goal_gating"]}
             if extractor is not None else None)
         publish(run_dir, policy_folder(paths.POLICY_CARD, variant.name, task, seed))
@@ -127,8 +128,8 @@ def _baseline_start(profile: Profile, variant: Variant, task: Task, params: PPOP
                     pretrained: Callable[[torch.nn.Module], None] | None, progress: bool
                     ) -> Callable[[torch.nn.Module], None]:
     """What a new baseline policy gets before PPO: the pretrained encoder (``pretrained``, if any), then, with
-    ``policy.baseline.imitation.rounds``, behaviour cloning from the oracle on in-process envs of its task."""
-    imitation = profile.policy.baseline.imitation
+    ``policy.baseline.imitation.<task>.rounds``, behaviour cloning from the oracle on in-process envs of its task."""
+    imitation = getattr(profile.policy.baseline.imitation, task)
 
     def initialize(model_policy: torch.nn.Module) -> None:
         if pretrained is not None:

@@ -70,6 +70,14 @@ class ImitationParams(ParamsModel):
                                                   "in an episode in all); false: only until it first sees it")
 
 
+class SkillImitationParams(ParamsModel):
+    """Each baseline skill's own imitation start: Pick needs more than Drop, whose target is a position it is given
+    (docs/assumptions.md, Baselines)."""
+
+    pick: ImitationParams = Field(default_factory=ImitationParams)
+    drop: ImitationParams = Field(default_factory=ImitationParams)
+
+
 class BaselineParams(ParamsModel):
     """The end-to-end CNN baselines (``mor.policy.baselines``): encoder and their Pick and Drop PPO runs."""
 
@@ -84,7 +92,7 @@ class BaselineParams(ParamsModel):
                                                  "(Gated-Attention, mor.policy.baselines.BaselineExtractor); false: "
                                                  "the class is only concatenated after the encoder, as the paper's")
     pretrain: EncoderPretrainParams = Field(default_factory=EncoderPretrainParams)
-    imitation: ImitationParams = Field(default_factory=ImitationParams)
+    imitation: SkillImitationParams = Field(default_factory=SkillImitationParams)
     pick: PPOParams = Field(default_factory=PPOParams)
     drop: PPOParams = Field(default_factory=PPOParams)
 

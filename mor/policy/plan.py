@@ -9,7 +9,7 @@ Starts (docs/assumptions.md, "Policies"):
 - a policy that starts from the main workspace's trains ``policy.finetune_steps[task]`` steps, one that starts from
   its warm-start variant's ``policy.lnet_steps[task]`` steps, not its task's ``steps``;
 - the baselines train their own skills (``Variant.trains``) from scratch with ``policy.baseline``'s parameters,
-  after its imitation start where ``policy.baseline.imitation.rounds`` > 0;
+  after its imitation start where ``policy.baseline.imitation.<task>.rounds`` > 0;
 - with ``more_steps`` (``mor policy train --more-steps N``, a budget study) every task instead continues this
   workspace's committed policy of the same variant, task and seed for N more steps (not for the baselines, whose
   start is an imitation of the oracle).
@@ -23,7 +23,7 @@ from pathlib import Path
 from mor.config import Profile
 from mor.errors import ConfigError
 from mor.policy.names import Task
-from mor.policy.params import PPOParams
+from mor.policy.params import ImitationParams, PPOParams
 from mor.policy.signature import read_signature
 from mor.policy.variants import Variant, policy_folder
 
@@ -53,6 +53,14 @@ def _start(profile: Profile, variant: Variant, task: Task, own: Path, main: Path
     return None, "from a random start", None
 
 
+def _imitation_start(imitation: ImitationParams) -> str:
+    """How a baseline skill starts, in words."""
+    if not imitation.rounds:
+        return "from a random start"
+    return (f"from {imitation.rounds} DAgger rounds of {imitation.round_steps:,} steps imitating the scripted "
+            "oracle")
+
+
 def training_plan(profile: Profile, variant: Variant, tasks: tuple[Task, ...], own: Path, main: Path, seed: int = 0,
                   more_steps: int | None = None) -> list[TaskPlan]:
     """The plan of ``tasks`` (in order) of ``variant``'s run with training seed ``seed``; ``own`` and ``main``: the
@@ -72,9 +80,8 @@ def training_plan(profile: Profile, variant: Variant, tasks: tuple[Task, ...], o
                 for task in tasks]
     if variant.is_baseline:
         baseline = policy.baseline
-        start = (f"from {baseline.imitation.rounds} DAgger rounds of {baseline.imitation.round_steps:,} steps "
-                 f"imitating the scripted oracle" if baseline.imitation.rounds else "from a random start")
-        return [TaskPlan(task, getattr(baseline, task), None, f"{start}, encoder {baseline.encoder}")
+        return [TaskPlan(task, getattr(baseline, task), None,
+                         f"{_imitation_start(getattr(baseline.imitation, task))}, encoder {baseline.encoder}")
                 for task in variant.trains if task in tasks]
     plans = []
     for task in tasks:

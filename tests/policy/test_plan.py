@@ -32,11 +32,13 @@ def test_the_lnet_variants_fine_tune_gt_pose_for_lnet_steps_and_gt_pose_starts_a
     assert [p.task for p in training_plan(profile, VARIANTS["baseline_landmark"], ("pick", "drop"), tmp_path,
                                           tmp_path)] == \
         ["drop"]  # its Pick is baseline_img's
-    for name in ("default", "paper"):  # both profiles' baselines imitate the oracle first, and the plan says so
+    for name in ("default", "paper"):  # both profiles' baselines imitate the oracle first, each skill its own way
         imitation = load_profile(name).policy.baseline.imitation
-        (pick,) = training_plan(load_profile(name), VARIANTS["baseline_img"], ("pick",), tmp_path, tmp_path)
-        assert imitation.rounds > 0 and pick.start is None
-        assert pick.why.startswith(f"from {imitation.rounds} DAgger rounds of {imitation.round_steps:,} steps")
+        assert imitation.pick.round_steps * imitation.pick.rounds > imitation.drop.round_steps * imitation.drop.rounds
+        for plan in training_plan(load_profile(name), VARIANTS["baseline_img"], ("pick", "drop"), tmp_path, tmp_path):
+            own = getattr(imitation, plan.task)
+            assert own.rounds > 0 and plan.start is None
+            assert plan.why.startswith(f"from {own.rounds} DAgger rounds of {own.round_steps:,} steps")
 
 
 def test_a_setting_fine_tunes_the_main_policies_and_its_own_decision_when_the_objects_differ(tmp_path: Path) -> None:
