@@ -198,6 +198,10 @@ def test_baseline_stages_train_evaluate_and_fill_table_1(workspace: Path) -> Non
     _run("policy", "train", "--variant", "baseline_landmark", "--profile", "tiny")
     assert (workspace / "cards/policy/baseline_img/pick/policy.pth").is_file()
     assert not (workspace / "cards/policy/baseline_landmark/pick").exists()
+    for task in ("pick", "drop"):  # each skill imitated with its own settings, and its summary says which
+        own = tiny["policy"]["baseline"]["imitation"][task]
+        summary = json.loads((workspace / f"cards/policy/baseline_img/{task}/summary.json").read_text())
+        assert {key: summary["imitation"][key] for key in own} == own
     for variant in ("baseline_img", "baseline_landmark"):  # `mor sim video --policy` offers every method
         out = workspace / f"{variant}.gif"
         assert f"wrote {out}" in _run("sim", "video", "--policy", variant, "--profile", "tiny", "--out", str(out))
