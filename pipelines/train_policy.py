@@ -135,7 +135,8 @@ def _baseline_start(profile: Profile, variant: Variant, task: Task, params: PPOP
         if pretrained is not None:
             pretrained(model_policy)
         if imitation.rounds:
-            env = make_training_env(task, variant, profile.sim, params.model_copy(update={"vec_env": "dummy"}),
+            env = make_training_env(task, variant, profile.sim,
+                                    params.model_copy(update={"vec_env": "dummy", "env_workers": 1}),
                                     profile.policy.observation)
             try:
                 clone_oracle(model_policy, env, imitation, params.gamma, seed, run_dir / IMITATION_LOG, progress)

@@ -1,5 +1,6 @@
 """``mor bench policy``: in one run, the environment's step rate on the no-render path (the ground truth's), with
-rendering and the L-Net at N envs (environments in this process, and one process each), and PPO's training rate for
+rendering and the L-Net at N envs as training steps them (in ``env_workers`` processes; with more than one, also all
+in this process, ``..._in_process``; with one, also one process each, ``..._subproc``), and PPO's training rate for
 each (steps/s, medians over repeats).
 
 The ground truth's path (keys named after its variant, ``GROUND_TRUTH.name``) is measured twice at the profile's
@@ -64,14 +65,19 @@ def bench_policy(sim: SimConfig, params: PPOParams, features: ObservationParams,
     rng = np.random.default_rng(0)
 
     def with_vec_env(kind: str) -> PPOParams:
-        return params.model_copy(update={"vec_env": kind})
+        return params.model_copy(update={"vec_env": kind, "env_workers": 1})
 
     truth = GROUND_TRUTH.name
     envs = {truth: make_training_env("pick", GROUND_TRUTH, sim, with_vec_env("batched"), features),
             f"{truth}_per_env": make_training_env("pick", GROUND_TRUTH, sim, with_vec_env("dummy"), features)}
-    if runner is not None:
-        envs |= {OURS.name: make_training_env("pick", OURS, sim, with_vec_env("dummy"), features, runner),
-                 f"{OURS.name}_subproc": make_training_env("pick", OURS, sim, with_vec_env("subproc"), features, runner)}
+    if runner is not None:  # the rendered path as training runs it (params.env_workers), and its alternative
+        envs[OURS.name] = make_training_env("pick", OURS, sim, params, features, runner)
+        if params.env_workers > 1:
+            envs[f"{OURS.name}_in_process"] = make_training_env("pick", OURS, sim, with_vec_env("dummy"), features,
+                                                                runner)
+        else:  # one process per env (with 64 envs, 64 processes that each import torch: too many beside the rest)
+            envs[f"{OURS.name}_subproc"] = make_training_env("pick", OURS, sim, with_vec_env("subproc"), features,
+                                                             runner)
     wide = BatchedPoseVecEnv("pick", sim, BATCHED_N_ENVS, ObservationLayout.of(GROUND_TRUTH, features))
     wide_key = f"env_{truth}_n{BATCHED_N_ENVS}"
     runs: dict[str, list[float]] = {f"{kind}_{name}": [] for kind in ("env", "ppo") for name in envs}
@@ -87,7 +93,7 @@ def bench_policy(sim: SimConfig, params: PPOParams, features: ObservationParams,
         env.close()
     rates = {k: float(np.median(v)) for k, v in runs.items()}
     targets = {f"ppo_{truth}": 5000, f"ppo_{OURS.name}": 1000, wide_key: 50000}
-    return {"n_envs": params.n_envs, "hidden": list(params.hidden), "n_steps": params.n_steps,
+    return {"n_envs": params.n_envs, "env_workers": params.env_workers, "hidden": list(params.hidden), "n_steps": params.n_steps,
             "batch_size": params.batch_size, "n_epochs": params.n_epochs, "image_size": sim.image_size,
             "seconds_per_measure": seconds, "repeats": repeats,
             "lnet_encoder": runner.config.encoder if runner is not None else None, "steps_per_second": rates,

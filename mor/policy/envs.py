@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import gymnasium as gym
@@ -10,6 +11,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 from mor.errors import ConfigError
 from mor.policy.batched_env import BATCHED_TASKS, BatchedPoseVecEnv
 from mor.policy.features import ObservationLayout
+from mor.policy.grouped_env import GroupedSubprocVecEnv
 from mor.policy.hierarchy import HierarchicalRearrange, Skill
 from mor.policy.names import PLAYS, Task, WorldTask
 from mor.policy.observations import GroundTruthTracker, PoseObservation, SingleTracker
@@ -61,7 +63,8 @@ def make_training_env(
     variant: ``PoseObservation`` envs without rendering. L-Net variants: for Pick/Drop rendered envs under
     ``LNetVecObservation``, one batched L-Net forward per vector step in this process; for the decision each env
     tracks its own belief (decisions last different numbers of steps) in this process. The envs run in this process
-    (``vec_env: dummy``) or one process each (``subproc``; not for the L-Net decision, whose tracker holds the model).
+    (``vec_env: dummy``) or one process each (``subproc``; not for the L-Net decision, whose tracker holds the model);
+    rendered Pick and Drop envs (L-Net variants, baselines) run in ``env_workers`` processes when it is above 1.
     """
     from mor.policy.lnet_tracking import LNetTracker, LNetVecObservation  # noqa: PLC0415 - torch only for L-Net
 
@@ -79,8 +82,16 @@ def make_training_env(
         arena = Arena.build(sim.arena, sim.arena_size) if layout.search else None
         return DummyVecEnv([lambda: make_policy_env(task, sim, LNetTracker(runner, arena), layout, skills)]
                            * params.n_envs)
-    raw = vec_env([lambda: make_task_env(PLAYS[task], sim, render_frames=True)] * params.n_envs)
+    raw = _rendered([lambda: make_task_env(PLAYS[task], sim, render_frames=True)] * params.n_envs, params)
     return LNetVecObservation(raw, runner, task, sim.n_objects, layout)
+
+
+def _rendered(env_fns: list[Callable[[], gym.Env]], params: PPOParams) -> VecEnv:
+    """Rendered envs for SB3: in ``params.env_workers`` processes (``mor.policy.grouped_env``), else as
+    ``params.vec_env`` says (one process each for ``subproc``, in this process otherwise)."""
+    if params.env_workers > 1:
+        return GroupedSubprocVecEnv(env_fns, params.env_workers)
+    return (SubprocVecEnv if params.vec_env == "subproc" else DummyVecEnv)(env_fns)
 
 
 def variant_sim(variant: Variant, sim: SimConfig) -> SimConfig:
@@ -93,6 +104,5 @@ def _baseline_training_env(task: Task, variant: Variant, sim: SimConfig, params:
     from mor.policy.baselines import BaselineObservation  # noqa: PLC0415 - torch only here
 
     world = variant_sim(variant, sim)
-    vec_env = SubprocVecEnv if params.vec_env == "subproc" else DummyVecEnv
-    return vec_env([lambda: BaselineObservation(make_task_env(PLAYS[task], world, render_frames=True),
-                                                variant.baseline_input)] * params.n_envs)
+    return _rendered([lambda: BaselineObservation(make_task_env(PLAYS[task], world, render_frames=True),
+                                                  variant.baseline_input)] * params.n_envs, params)

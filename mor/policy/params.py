@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from mor.params_model import ParamsModel, Seeds
 from mor.policy.names import Task
@@ -22,6 +22,10 @@ class PPOParams(ParamsModel):
     vec_env: Literal["dummy", "subproc", "batched"] = Field(
         "dummy", description="dummy: the envs in this process; subproc: one process each; batched: the ground truth's "
                              "Pick and Drop as one array-stepped env (mor.policy.batched_env), the rest as dummy")
+    env_workers: int = Field(1, ge=1, le=256, description="processes that step the rendered Pick and Drop envs (the "
+                                                           "L-Net variants' and the baselines'), each its share in "
+                                                           "series (mor.policy.grouped_env); 1: in this process. "
+                                                           "Not with vec_env subproc")
     hidden: list[int] = Field(default_factory=lambda: [256, 256, 256, 256], min_length=1)
     n_steps: int = Field(256, ge=2, description="steps per env per rollout")
     batch_size: int = Field(512, ge=2)
@@ -36,6 +40,14 @@ class PPOParams(ParamsModel):
     checkpoint_every: int = Field(50_000, ge=1, description="steps between resumable checkpoints")
     device: Literal["cpu", "cuda", "auto"] = Field("cpu", description="where the PPO update runs; auto: CUDA when "
                                                                       "there is one (the paper profile's ResNets)")
+
+    @model_validator(mode="after")
+    def _workers_fit(self) -> PPOParams:
+        if self.env_workers > self.n_envs:
+            raise ValueError(f"env_workers: {self.env_workers} is more than the {self.n_envs} envs (n_envs); lower it")
+        if self.env_workers > 1 and self.vec_env == "subproc":
+            raise ValueError("env_workers: subproc already runs one process per env; use vec_env dummy or batched")
+        return self
 
 
 class EncoderPretrainParams(ParamsModel):

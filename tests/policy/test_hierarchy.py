@@ -128,10 +128,11 @@ def test_the_policy_benchmark_measures_every_path_in_one_run() -> None:
     torch.manual_seed(0)
     runner = LNetRunner(LNet(LNetConfig(feature_dim=16, mlp_hidden=16, lstm_hidden=16)), FittedCalibration(), 16,
                         "test")
-    result = bench_policy(SIM, TINY_PPO, FEATURES, runner, seconds=0.2, repeats=1, progress=False)
-    assert set(result["steps_per_second"]) == {f"{kind}_{name}" for kind in ("env", "ppo")
-                                               for name in ("gt_pose", "gt_pose_per_env", "lnet", "lnet_subproc")
-                                               } | {"env_gt_pose_n64"}
+    in_two_workers = TINY_PPO.model_copy(update={"env_workers": 2})  # training's rendered path, and in process
+    result = bench_policy(SIM, in_two_workers, FEATURES, runner, seconds=0.2, repeats=1, progress=False)
+    assert set(result["steps_per_second"]) == {f"{kind}_{name}" for kind in ("env", "ppo") for name in (
+        "gt_pose", "gt_pose_per_env", "lnet", "lnet_in_process")} | {"env_gt_pose_n64"}
+    assert result["env_workers"] == 2
     assert set(result["batched_over_per_env"]) == {"env", "ppo"}
     assert all(rate > 0 for rate in result["steps_per_second"].values())
 
