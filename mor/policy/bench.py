@@ -93,9 +93,9 @@ def bench_policy(sim: SimConfig, params: PPOParams, features: ObservationParams,
         env.close()
     rates = {k: float(np.median(v)) for k, v in runs.items()}
     targets = {f"ppo_{truth}": 5000, f"ppo_{OURS.name}": 1000, wide_key: 50000}
-    return {"n_envs": params.n_envs, "env_workers": params.env_workers, "hidden": list(params.hidden), "n_steps": params.n_steps,
-            "batch_size": params.batch_size, "n_epochs": params.n_epochs, "image_size": sim.image_size,
-            "seconds_per_measure": seconds, "repeats": repeats,
+    return {"n_envs": params.n_envs, "env_workers": params.env_workers, "hidden": list(params.hidden),
+            "n_steps": params.n_steps, "batch_size": params.batch_size, "n_epochs": params.n_epochs,
+            "image_size": sim.image_size, "seconds_per_measure": seconds, "repeats": repeats,
             "lnet_encoder": runner.config.encoder if runner is not None else None, "steps_per_second": rates,
             "batched_over_per_env": {kind: round(rates[f"{kind}_{truth}"] / rates[f"{kind}_{truth}_per_env"], 2)
                                      for kind in ("env", "ppo")},

@@ -5,9 +5,10 @@ env (DLR-RM/stable-baselines3#815). Here each worker holds a ``DummyVecEnv`` of 
 per vector step, so the rendering of the N frames spreads over the K processes while the caller (the L-Net's
 batched forward, the PPO update) runs in its own.
 
-Environment ``i`` lives in worker ``i * K // N`` (contiguous shares, sizes differing by at most one) and is seeded,
-reset and stepped exactly as in a ``DummyVecEnv`` of the same ``env_fns``: the same observations, rewards, dones
-and infos, in the same order (``tests/policy/test_grouped_env.py``).
+The workers hold ``numpy.array_split``'s shares of the N indices (contiguous, sizes differing by at most one; for
+N = 5, K = 2: environments 0-2 and 3-4). Each environment is seeded, reset and stepped exactly as in a
+``DummyVecEnv`` of the same ``env_fns``: the same observations, rewards, dones and infos, in the same order
+(``tests/policy/test_grouped_env.py``).
 """
 
 from __future__ import annotations
