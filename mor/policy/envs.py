@@ -71,11 +71,11 @@ def make_training_env(
     if variant.is_baseline:
         return _baseline_training_env(task, variant, sim, params)
     layout = ObservationLayout.of(variant, features)
-    vec_env = SubprocVecEnv if params.vec_env == "subproc" else DummyVecEnv
     if variant.source == "truth":
         if params.vec_env == "batched" and task in BATCHED_TASKS:
             return BatchedPoseVecEnv(task, sim, params.n_envs, layout)
-        return vec_env([lambda: make_policy_env(task, sim, GroundTruthTracker(), layout, skills)] * params.n_envs)
+        return _per_env_processes(params)([lambda: make_policy_env(task, sim, GroundTruthTracker(), layout, skills)]
+                                          * params.n_envs)
     if runner is None:
         raise ValueError(f"variant {variant.name!r} needs the trained L-Net (runner)")
     if task == "decision":
@@ -91,7 +91,12 @@ def _rendered(env_fns: list[Callable[[], gym.Env]], params: PPOParams) -> VecEnv
     ``params.vec_env`` says (one process each for ``subproc``, in this process otherwise)."""
     if params.env_workers > 1:
         return GroupedSubprocVecEnv(env_fns, params.env_workers)
-    return (SubprocVecEnv if params.vec_env == "subproc" else DummyVecEnv)(env_fns)
+    return _per_env_processes(params)(env_fns)
+
+
+def _per_env_processes(params: PPOParams) -> type[DummyVecEnv] | type[SubprocVecEnv]:
+    """SB3's vector env that ``params.vec_env`` names: one process per env for ``subproc``, else in this process."""
+    return SubprocVecEnv if params.vec_env == "subproc" else DummyVecEnv
 
 
 def variant_sim(variant: Variant, sim: SimConfig) -> SimConfig:
