@@ -22,7 +22,7 @@ from mor.policy.frame_encoder import ENCODER_FILE
 from mor.policy.hierarchy import POLICY_FILE, Skill
 from mor.policy.imitation import clone_oracle
 from mor.policy.names import IMITATION_LOG, TASKS, Task
-from mor.policy.params import PPOParams
+from mor.policy.params import ImitationParams, PPOParams
 from mor.policy.plan import TaskPlan, training_plan
 from mor.policy.signature import PolicySignature, warm_start_names
 from mor.policy.train import train_policy
@@ -109,14 +109,16 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
         if more_steps is not None:  # not the original run's folder, whose finished checkpoint would be resumed
             run_dir = run_dir.with_name(f"{task}.more_{more_steps}")
         extractor = baseline_extractor(policy.baseline, task) if variant.is_baseline else None
+        imitation = getattr(policy.baseline.imitation, task)
         summary = train_policy(
             lambda: make_training_env(task, variant, sim, params, policy.observation, runner, skills),  # noqa: B023
             params, signature, run_dir, seed, f"{variant.name} {task}" + (f" seed {seed}" if seed else ""),
             progress, init_from, policy_kwargs=extractor,
-            initialize=_baseline_start(profile, variant, task, params, seed, run_dir, pretrained, progress)
+            initialize=_baseline_start(profile, variant, task, params, imitation, seed, run_dir, pretrained,
+                                       progress)
             if variant.is_baseline else None,
             recipe={"encoder": policy.baseline.encoder,
-                    "imitation": getattr(policy.baseline.imitation, task).model_dump(),
+                    "imitation": imitation.model_dump(),
                     "goal_gating": extractor["features_extractor_kwargs"]["goal_gating"]}
             if extractor is not None else None)
         publish(run_dir, policy_folder(paths.POLICY_CARD, variant.name, task, seed))
@@ -124,12 +126,12 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
     return summaries
 
 
-def _baseline_start(profile: Profile, variant: Variant, task: Task, params: PPOParams, seed: int, run_dir: Path,
-                    pretrained: Callable[[torch.nn.Module], None] | None, progress: bool
+def _baseline_start(profile: Profile, variant: Variant, task: Task, params: PPOParams, imitation: ImitationParams,
+                    seed: int, run_dir: Path, pretrained: Callable[[torch.nn.Module], None] | None, progress: bool
                     ) -> Callable[[torch.nn.Module], None]:
     """What a new baseline policy gets before PPO: the pretrained encoder (``pretrained``, if any), then, with
-    ``policy.baseline.imitation.<task>.rounds``, behaviour cloning from the oracle on in-process envs of its task."""
-    imitation = getattr(profile.policy.baseline.imitation, task)
+    ``imitation.rounds`` (``policy.baseline.imitation.<task>``), behaviour cloning from the oracle on in-process
+    envs of its task."""
 
     def initialize(model_policy: torch.nn.Module) -> None:
         if pretrained is not None:

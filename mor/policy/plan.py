@@ -27,6 +27,8 @@ from mor.policy.params import ImitationParams, PPOParams
 from mor.policy.signature import read_signature
 from mor.policy.variants import Variant, policy_folder
 
+RANDOM_START = "from a random start"
+
 
 @dataclass(frozen=True)
 class TaskPlan:
@@ -50,13 +52,13 @@ def _start(profile: Profile, variant: Variant, task: Task, own: Path, main: Path
     if variant.warm_start is not None and policy.lnet_warm_start:
         return (policy_folder(own, variant.warm_start, task, seed),
                 f"fine-tunes this workspace's {variant.warm_start} policy (policy.lnet_warm_start)", "lnet_steps")
-    return None, "from a random start", None
+    return None, RANDOM_START, None
 
 
 def _imitation_start(imitation: ImitationParams) -> str:
     """How a baseline skill starts, in words."""
     if not imitation.rounds:
-        return "from a random start"
+        return RANDOM_START
     return (f"from {imitation.rounds} DAgger rounds of {imitation.round_steps:,} steps imitating the scripted "
             "oracle")
 
