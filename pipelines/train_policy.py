@@ -108,19 +108,18 @@ def _train(profile: Profile, variant: Variant, tasks: tuple[Task, ...], seed: in
         run_dir = policy_folder(paths.POLICIES, variant.name, task, seed)
         if more_steps is not None:  # not the original run's folder, whose finished checkpoint would be resumed
             run_dir = run_dir.with_name(f"{task}.more_{more_steps}")
-        extractor = baseline_extractor(policy.baseline, task) if variant.is_baseline else None
-        imitation = getattr(policy.baseline.imitation, task)
+        extractor, initialize, recipe = None, None, None
+        if variant.is_baseline:  # a baseline skill (pick or drop): its own network, start and recorded recipe
+            extractor = baseline_extractor(policy.baseline, task)
+            imitation = getattr(policy.baseline.imitation, task)
+            initialize = _baseline_start(profile, variant, task, params, imitation, seed, run_dir, pretrained,
+                                         progress)
+            recipe = {"encoder": policy.baseline.encoder, "imitation": imitation.model_dump(),
+                      "goal_gating": extractor["features_extractor_kwargs"]["goal_gating"]}
         summary = train_policy(
             lambda: make_training_env(task, variant, sim, params, policy.observation, runner, skills),  # noqa: B023
             params, signature, run_dir, seed, f"{variant.name} {task}" + (f" seed {seed}" if seed else ""),
-            progress, init_from, policy_kwargs=extractor,
-            initialize=_baseline_start(profile, variant, task, params, imitation, seed, run_dir, pretrained,
-                                       progress)
-            if variant.is_baseline else None,
-            recipe={"encoder": policy.baseline.encoder,
-                    "imitation": imitation.model_dump(),
-                    "goal_gating": extractor["features_extractor_kwargs"]["goal_gating"]}
-            if extractor is not None else None)
+            progress, init_from, policy_kwargs=extractor, initialize=initialize, recipe=recipe)
         publish(run_dir, policy_folder(paths.POLICY_CARD, variant.name, task, seed))
         summaries.append(summary)
     return summaries
